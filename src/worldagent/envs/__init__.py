@@ -1,0 +1,1 @@
+"""Environments: worlds as pytrees, pure-JAX dynamics, Gymnasium / PettingZoo adapters."""

@@ -1,0 +1,100 @@
+"""The functional environment contract (DESIGN.md, "Environment") and one place for autoreset.
+
+An environment is a frozen object holding *static* configuration (shapes, number of agents);
+everything traced lives in ``params`` (a pytree) and ``state`` (a pytree that carries its
+``world``). Both methods are pure and jittable::
+
+    obs, state = env.reset(key, world, params)
+    obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
+
+Multi-agent environments put a leading agent axis on ``obs``, ``action`` and ``reward``.
+Per-episode metrics are accumulated in ``state`` so that evaluation never stores trajectories.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from worldagent.errors import WorldagentError
+
+
+class World(Protocol):
+    """A world: a ``flax.struct.dataclass`` of fixed-shape arrays with a host-side check."""
+
+    def validate(self) -> None:
+        """Raise ``WorldagentError`` naming the problem if the world is not playable."""
+
+
+class Environment:
+    """Base class of the pure-JAX environments; subclasses are frozen dataclasses."""
+
+    num_agents: int = 1
+
+    @property
+    def default_params(self) -> Any:
+        raise NotImplementedError
+
+    @property
+    def num_actions(self) -> int:
+        raise NotImplementedError
+
+    @property
+    def observation_shape(self) -> tuple[int, ...]:
+        raise NotImplementedError
+
+    def reset(self, key: jax.Array, world: Any, params: Any) -> tuple[jax.Array, Any]:
+        raise NotImplementedError
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array, params: Any):
+        raise NotImplementedError
+
+
+def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Array, params: Any):
+    """``env.step``, then, where the episode ended, a fresh episode on the same world.
+
+    The returned ``obs`` and ``state`` are those of the new episode where it ended; ``reward``,
+    ``terminated``, ``truncated`` and ``info`` are those of the step that ended it (gymnax's
+    convention). The world is never copied: only the dynamic fields are selected.
+    """
+    key_step, key_reset = jax.random.split(key)
+    obs, next_state, reward, terminated, truncated, info = env.step(key_step, state, action, params)
+    reset_obs, reset_state = env.reset(key_reset, state.world, params)
+    done = jnp.logical_or(terminated, truncated)
+    if done.ndim:  # multi-agent envs end an episode for everybody at once
+        done = done.any()
+    pick = lambda fresh, old: jax.lax.select(done, fresh, old)  # noqa: E731
+    new_state = jax.tree_util.tree_map(pick, reset_state.replace(world=None), next_state.replace(world=None))
+    new_state = new_state.replace(world=state.world)
+    return pick(reset_obs, obs), new_state, reward, terminated, truncated, info
+
+
+def check_finite(name: str, value: Any) -> np.ndarray:
+    """Host-side check that ``value`` is a finite float array; returns it as numpy."""
+    array = np.asarray(value, dtype=np.float64)
+    if not np.all(np.isfinite(array)):
+        raise WorldagentError(f"{name} contains NaN or infinite values; pass finite numbers.")
+    return array
+
+
+def check_shape(name: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
+    """Host-side check of an array's shape; ``None`` in ``shape`` matches any size."""
+    array = np.asarray(value)
+    ok = array.ndim == len(shape) and all(w is None or w == s for s, w in zip(array.shape, shape))
+    if not ok:
+        want = "(" + ", ".join("any" if w is None else str(w) for w in shape) + ")"
+        raise WorldagentError(f"{name} has shape {array.shape}; expected {want}.")
+    return array
+
+
+def check_actions(value: Any, num_actions: int, shape: tuple[int, ...] = ()) -> np.ndarray:
+    """Host-side check that actions are integers in ``[0, num_actions)`` of the given shape."""
+    array = np.asarray(value)
+    if array.shape != shape:
+        raise WorldagentError(f"action has shape {array.shape}; expected {shape}.")
+    if not np.issubdtype(array.dtype, np.integer) or array.min(initial=0) < 0 or array.max(initial=0) >= num_actions:
+        raise WorldagentError(f"action {array.tolist()} is not an integer in [0, {num_actions}); pick a valid action index.")
+    return array

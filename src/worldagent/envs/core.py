@@ -58,7 +58,9 @@ def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Arr
 
     The returned ``obs`` and ``state`` are those of the new episode where it ended; ``reward``,
     ``terminated``, ``truncated`` and ``info`` are those of the step that ended it (gymnax's
-    convention). The world is never copied: only the dynamic fields are selected.
+    convention). The world is never copied: only the dynamic fields are selected. Envs with an
+    ``observe(state, params)`` method are observed once, after the selection, so that the
+    observations of the step and of the reset are never both computed.
     """
     key_step, key_reset = jax.random.split(key)
     obs, next_state, reward, terminated, truncated, info = env.step(key_step, state, action, params)
@@ -69,7 +71,9 @@ def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Arr
     pick = lambda fresh, old: jax.lax.select(done, fresh, old)  # noqa: E731
     new_state = jax.tree_util.tree_map(pick, reset_state.replace(world=None), next_state.replace(world=None))
     new_state = new_state.replace(world=state.world)
-    return pick(reset_obs, obs), new_state, reward, terminated, truncated, info
+    observe = getattr(env, "observe", None)
+    new_obs = observe(new_state, params) if observe is not None else pick(reset_obs, obs)
+    return new_obs, new_state, reward, terminated, truncated, info
 
 
 def check_finite(name: str, value: Any) -> np.ndarray:
@@ -80,14 +84,13 @@ def check_finite(name: str, value: Any) -> np.ndarray:
     return array
 
 
-def check_shape(name: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
-    """Host-side check of an array's shape; ``None`` in ``shape`` matches any size."""
-    array = np.asarray(value)
-    ok = array.ndim == len(shape) and all(w is None or w == s for s, w in zip(array.shape, shape))
+def check_shape(name: str, value: Any, shape: tuple[int | None, ...]) -> None:
+    """Check an array's shape (static, so this works on tracers too); ``None`` matches any size."""
+    actual = np.shape(value)
+    ok = len(actual) == len(shape) and all(w is None or w == s for s, w in zip(actual, shape))
     if not ok:
         want = "(" + ", ".join("any" if w is None else str(w) for w in shape) + ")"
-        raise WorldagentError(f"{name} has shape {array.shape}; expected {want}.")
-    return array
+        raise WorldagentError(f"{name} has shape {tuple(actual)}; expected {want}.")
 
 
 def check_actions(value: Any, num_actions: int, shape: tuple[int, ...] = ()) -> np.ndarray:
@@ -98,3 +101,37 @@ def check_actions(value: Any, num_actions: int, shape: tuple[int, ...] = ()) -> 
     if not np.issubdtype(array.dtype, np.integer) or array.min(initial=0) < 0 or array.max(initial=0) >= num_actions:
         raise WorldagentError(f"action {array.tolist()} is not an integer in [0, {num_actions}); pick a valid action index.")
     return array
+
+
+def rollout(env: Environment, policy, key: jax.Array, world: Any, params: Any, num_steps: int):
+    """One episode of at most ``num_steps`` steps as a ``lax.scan``; frozen once it ends.
+
+    Args:
+        policy: ``policy(key, obs, state) -> action`` (pure JAX).
+
+    Returns:
+        (final_state, trajectory): ``trajectory`` holds per-step pytrees with a leading time axis
+        ``[T, ...]``: ``state`` (the state after each step, without its world), ``action``,
+        ``reward`` and ``alive`` (True for the steps taken before the episode ended).
+    """
+    key_reset, key_steps = jax.random.split(key)
+    obs, state = env.reset(key_reset, world, params)
+
+    def one_step(carry, step_key):
+        obs, state, done = carry
+        key_act, key_env = jax.random.split(step_key)
+        action = policy(key_act, obs, state)
+        next_obs, next_state, reward, terminated, truncated, _ = env.step(key_env, state, action, params)
+        keep = lambda new, old: jax.lax.select(done, old, new)  # noqa: E731
+        next_obs = keep(next_obs, obs)
+        next_state = jax.tree_util.tree_map(keep, next_state, state)
+        reward = jnp.where(done, jnp.zeros_like(reward), reward)
+        ended = jnp.logical_or(terminated, truncated)
+        next_done = jnp.logical_or(done, ended.any() if ended.ndim else ended)
+        record = {"state": next_state.replace(world=None), "action": action, "reward": reward, "alive": ~done}
+        return (next_obs, next_state, next_done), record
+
+    (_, final_state, _), trajectory = jax.lax.scan(
+        one_step, (obs, state, jnp.bool_(False)), jax.random.split(key_steps, num_steps)
+    )
+    return final_state, trajectory

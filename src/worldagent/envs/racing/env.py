@@ -1,0 +1,280 @@
+"""Particle Racing (paper §5.1.1, Figure 4): a particle driven by unit forces around a track.
+
+The agent is a point with a velocity. Each step it applies a force of fixed size in one of four
+directions (+x, -x, +y, -y); its velocity decays by the track's friction, then moves it. Reward
+per step is ``-step_penalty`` plus ``lap_reward`` times the fraction of a lap it advanced along
+the centreline (so "proportional to its speed along the track"). Leaving the road (distance to
+the centreline above the half-width) is a crash: ``-crash_penalty`` and the episode terminates.
+One full lap of net progress terminates it too; ``max_steps`` steps without either truncate it.
+
+Where the agent is on the track is found by searching the ``2·search_radius + 1`` centreline
+segments around the one it was on at the previous step, not the whole loop: a step costs O(17)
+instead of O(K), and a jump across the grass onto another part of the track is not "on the
+road" (no shortcuts). The radius covers the largest distance the particle can move in one step
+(``force / friction``) on the shortest tracks with margin; ``tests/envs/racing`` checks it.
+
+Observation (f32[W·W + 4]): the ``W×W`` window of the world's 128×128 road mask around the
+agent (1 = road, 0 = grass, row 0 to the north), flattened, then the position (x, y) in
+normalised coordinates and the velocity divided by the top speed ``force / friction``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from worldagent.envs.core import Environment, check_actions, check_finite, check_shape
+from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, Track
+from worldagent.errors import WorldagentError
+
+# Unit force directions of the four actions: +x (east), -x (west), +y (north), -y (south).
+ACTION_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]], dtype=np.float32)
+ACTION_NAMES = ("east", "west", "north", "south")
+
+
+@struct.dataclass
+class RacingParams:
+    """Traced parameters of Particle Racing.
+
+    The defaults were chosen by driving the reference driver over CarRacing tracks (~3.2 units
+    long, tightest turns of radius ~0.034): the top speed ``force / friction = 0.04`` per step is
+    two road half-widths, a turn of radius r can be held only below ``sqrt(force·r)`` (~0.012
+    in the tightest ones), and velocity responds within ``1 / friction = 10`` steps. A careful
+    driver laps in ~200 steps, a fast one in ~100, so the paper's 300-step limit rewards speed
+    and punishes hesitation, and sharp corners are worth slowing down for.
+
+    Attributes:
+        force: speed added per step in the chosen direction (normalised units / step²).
+        friction: fraction of the velocity lost per step to the track.
+        step_penalty: reward lost every step (paper: 0.2).
+        lap_reward: reward for one whole lap of progress along the centreline.
+        crash_penalty: reward lost on leaving the road (paper: 300).
+        max_steps: steps after which an episode is truncated (paper: 300).
+        half_width: road half-width in normalised units (upstream: 40/6 units = 0.02).
+    """
+
+    force: float = 0.004
+    friction: float = 0.1
+    step_penalty: float = 0.2
+    lap_reward: float = 100.0
+    crash_penalty: float = 300.0
+    max_steps: int = 300
+    half_width: float = HALF_WIDTH
+
+
+@struct.dataclass
+class RacingState:
+    """The agent, where it is on the track, and the episode's running metrics.
+
+    Attributes:
+        world: the Track being driven.
+        position, velocity: f32[2] in normalised units (per step).
+        segment: i32 index of the centreline segment the agent is on (from point i to i+1).
+        arc: f32 position along the loop as a lap fraction in [0, 1).
+        progress: f32 net laps driven (unwrapped; negative when driving backwards).
+        time: i32 steps taken.
+        episode_return: f32 sum of rewards.
+        crashed, lap_completed: bool, how the episode ended (if it did).
+        done: bool, whether the episode has ended (later steps are not meaningful).
+    """
+
+    world: Track
+    position: jax.Array
+    velocity: jax.Array
+    segment: jax.Array
+    arc: jax.Array
+    progress: jax.Array
+    time: jax.Array
+    episode_return: jax.Array
+    crashed: jax.Array
+    lap_completed: jax.Array
+    done: jax.Array
+
+
+def _closest_on_segments(position: jax.Array, starts: jax.Array, ends: jax.Array):
+    """Distances f32[S] from ``position`` to segments ``starts[S,2] -> ends[S,2]`` and fractions t."""
+    direction = ends - starts
+    length_sq = jnp.maximum(jnp.sum(direction**2, axis=-1), 1e-12)
+    t = jnp.clip(jnp.sum((position - starts) * direction, axis=-1) / length_sq, 0.0, 1.0)
+    closest = starts + t[:, None] * direction
+    return jnp.sqrt(jnp.sum((position - closest) ** 2, axis=-1)), t
+
+
+def locate(centreline: jax.Array, position: jax.Array, near: jax.Array, radius: int):
+    """Nearest centreline segment to ``position`` among those within ``radius`` of ``near``.
+
+    Returns:
+        (segment i32, arc f32 lap fraction in [0, 1), distance f32 to the centreline).
+    """
+    num_points = centreline.shape[0]
+    candidates = (near + jnp.arange(-radius, radius + 1)) % num_points
+    distances, t = _closest_on_segments(position, centreline[candidates], centreline[(candidates + 1) % num_points])
+    best = jnp.argmin(distances)
+    segment = candidates[best]
+    arc = (segment + t[best]) / num_points
+    return segment, arc, distances[best]
+
+
+def wrap_half(x: jax.Array) -> jax.Array:
+    """Wrap a lap-fraction difference into [-0.5, 0.5)."""
+    return (x + 0.5) % 1.0 - 0.5
+
+
+@dataclass(frozen=True)
+class ParticleRacing(Environment):
+    """The Particle Racing environment; static configuration only (see module docstring).
+
+    Attributes:
+        window: side W of the square observation window, in road-mask pixels (1/64 units each).
+        search_radius: segments searched either side of the last one to locate the agent.
+        num_points: centreline points K of the worlds this env accepts.
+    """
+
+    window: int = 16
+    search_radius: int = 8
+    num_points: int = NUM_POINTS
+
+    num_agents = 1
+
+    def __post_init__(self):
+        largest = int(ROAD_SIZE * (1.0 - MAX_EXTENT - 2 * HALF_WIDTH))
+        if not 1 <= self.window <= largest:
+            raise WorldagentError(f"window={self.window} is out of range; use 1 to {largest} road-mask pixels.")
+        if self.search_radius < 1 or 2 * self.search_radius + 1 > self.num_points:
+            raise WorldagentError(f"search_radius={self.search_radius} must be >= 1 and cover fewer than num_points segments.")
+
+    @property
+    def default_params(self) -> RacingParams:
+        return RacingParams()
+
+    @property
+    def num_actions(self) -> int:
+        return len(ACTION_DIRECTIONS)
+
+    @property
+    def observation_shape(self) -> tuple[int, ...]:
+        return (self.window * self.window + 4,)
+
+    # -- host-side checks (shapes always; values whenever they are concrete) ------------------
+
+    def check_world(self, world: Track) -> None:
+        """Raise ``WorldagentError`` if ``world`` is not one track this env can drive."""
+        if not isinstance(world, Track):
+            raise WorldagentError(f"world is a {type(world).__name__}; expected a racing Track (see generate_tracks).")
+        check_shape("track centreline", world.centreline, (self.num_points, 2))
+        check_shape("track raster", world.raster, (RASTER_SIZE, RASTER_SIZE))
+        check_shape("track road mask", world.road, (ROAD_SIZE, ROAD_SIZE))
+        if _is_concrete(world.centreline):
+            world.validate()
+
+    # -- the functional contract ----------------------------------------------------------------
+
+    def reset(self, key: jax.Array, world: Track, params: RacingParams) -> tuple[jax.Array, RacingState]:
+        """Start an episode at the start line (centreline point 0), at rest. ``key`` is unused."""
+        self.check_world(world)
+        centreline = jnp.asarray(world.centreline, jnp.float32)
+        state = RacingState(
+            world=world,
+            position=centreline[0],
+            velocity=jnp.zeros(2, jnp.float32),
+            segment=jnp.int32(0),
+            arc=jnp.float32(0.0),
+            progress=jnp.float32(0.0),
+            time=jnp.int32(0),
+            episode_return=jnp.float32(0.0),
+            crashed=jnp.bool_(False),
+            lap_completed=jnp.bool_(False),
+            done=jnp.bool_(False),
+        )
+        return self.observe(state, params), state
+
+    def place(self, state: RacingState, position, velocity, params: RacingParams) -> tuple[jax.Array, RacingState]:
+        """Put the agent at ``position`` with ``velocity`` (for tests, demos and start-state studies)."""
+        for name, value in (("position", position), ("velocity", velocity)):
+            check_shape(name, value, (2,))
+            if _is_concrete(value):
+                check_finite(name, value)
+        position = jnp.asarray(position, jnp.float32)
+        segment = _global_segment(state.world.centreline, position)
+        segment, arc, _ = locate(state.world.centreline, position, segment, self.search_radius)
+        state = state.replace(position=position, velocity=jnp.asarray(velocity, jnp.float32), segment=segment, arc=arc)
+        return self.observe(state, params), state
+
+    def step(self, key: jax.Array, state: RacingState, action: jax.Array, params: RacingParams):
+        """Advance one step (paper §5.1.1). ``key`` is unused: the dynamics are deterministic."""
+        if _is_concrete(action):
+            check_actions(action, self.num_actions)
+        velocity = (1.0 - params.friction) * state.velocity + params.force * jnp.asarray(ACTION_DIRECTIONS)[action]
+        position = state.position + velocity
+        segment, arc, distance = locate(state.world.centreline, position, state.segment, self.search_radius)
+        advance = wrap_half(arc - state.arc)
+        progress = state.progress + advance
+        time = state.time + 1
+
+        crashed = distance > params.half_width
+        lap_completed = jnp.logical_and(progress >= 1.0, ~crashed)
+        terminated = jnp.logical_or(crashed, lap_completed)
+        truncated = jnp.logical_and(time >= params.max_steps, ~terminated)
+        reward = -params.step_penalty + params.lap_reward * advance - params.crash_penalty * crashed
+
+        state = state.replace(
+            position=position,
+            velocity=velocity,
+            segment=segment,
+            arc=arc,
+            progress=progress,
+            time=time,
+            episode_return=state.episode_return + reward,
+            crashed=crashed,
+            lap_completed=lap_completed,
+            done=jnp.logical_or(terminated, truncated),
+        )
+        info = {"crashed": crashed, "lap_completed": lap_completed, "progress": progress}
+        return self.observe(state, params), state, reward, terminated, truncated, info
+
+    def observe(self, state: RacingState, params: RacingParams) -> jax.Array:
+        """f32[W·W + 4]: road window around the agent, position, velocity / top speed."""
+        row_col = _to_pixel_jnp(state.position, ROAD_SIZE)
+        start = jnp.round(row_col).astype(jnp.int32) - self.window // 2
+        window = jax.lax.dynamic_slice(state.world.road, (start[0], start[1]), (self.window, self.window))
+        top_speed = params.force / params.friction
+        return jnp.concatenate(
+            [window.reshape(-1).astype(jnp.float32), state.position, state.velocity / top_speed]
+        ).astype(jnp.float32)
+
+
+def episode_metrics(state: RacingState) -> dict[str, jax.Array]:
+    """The per-episode metrics later phases optimise: return, crashed, lap, progress, steps."""
+    return {
+        "return": state.episode_return,
+        "crashed": state.crashed,
+        "lap_completed": state.lap_completed,
+        "progress": jnp.clip(state.progress, 0.0, 1.0),
+        "steps": state.time,
+    }
+
+
+def split_observation(obs, window: int) -> tuple:
+    """Split observations ``[..., W·W + 4]`` into (window ``[..., W, W]``, position, velocity)."""
+    cells = window * window
+    return obs[..., :cells].reshape(*obs.shape[:-1], window, window), obs[..., cells : cells + 2], obs[..., cells + 2 :]
+
+
+def _to_pixel_jnp(xy: jax.Array, size: int) -> jax.Array:
+    """``world.to_pixel`` in jnp: normalised (x, y) -> continuous (row, col)."""
+    return jnp.stack([(1.0 - xy[1]) * size / 2.0 - 0.5, (xy[0] + 1.0) * size / 2.0 - 0.5])
+
+
+def _global_segment(centreline: jax.Array, position: jax.Array) -> jax.Array:
+    """Index of the nearest centreline segment over the whole loop (used only when placing)."""
+    distances, _ = _closest_on_segments(position, centreline, jnp.roll(centreline, -1, axis=0))
+    return jnp.argmin(distances).astype(jnp.int32)
+
+
+def _is_concrete(value) -> bool:
+    """True when ``value`` holds actual numbers (not a tracer inside jit/vmap/scan)."""
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(value))

@@ -21,6 +21,21 @@ app = typer.Typer(
 console = Console(stderr=True)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from worldagent import __version__
+
+        typer.echo(f"worldagent {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def root(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."),
+) -> None:
+    """Find the worlds in which trained RL agents fail or shine, and reshape what they train on."""
+
+
 def friendly_errors(command):
     """Decorator: report ``WorldagentError`` as one line on stderr and exit with code 2."""
 
@@ -49,7 +64,3 @@ def tracks(
     batch = generate_tracks(seeds_from(seed, n))
     draw_track_sheet(batch, out, seeds=seeds_from(seed, n))
     console.print(f"wrote {n} tracks to {out}")
-
-
-def main() -> None:  # pragma: no cover - the console script calls ``app`` directly
-    app()

@@ -1,6 +1,7 @@
 """Standard interfaces over the pure-JAX envs, so users can bring their own agents.
 
-``ParticleRacingGym`` is a ``gymnasium.Env`` (registered as ``worldagent/ParticleRacing-v0``)
+``ParticleRacingGym`` is a ``gymnasium.Env`` (registered as ``worldagent/ParticleRacing-v0`` by
+``import worldagent``)
 that draws a new track from CarRacing's generator at every reset, seeded by Gymnasium's own
 ``np_random``; ``reset(options={"world": track})`` drives a given track instead.
 """
@@ -15,9 +16,6 @@ from gymnasium import spaces
 from worldagent.envs.core import check_actions
 from worldagent.envs.racing.env import ParticleRacing, RacingParams
 from worldagent.envs.racing.world import Track
-
-RACING_ID = "worldagent/ParticleRacing-v0"
-
 
 class ParticleRacingGym(gymnasium.Env):
     """Particle Racing as a Gymnasium env: ``Box(W·W + 4)`` observations, ``Discrete(4)`` actions.
@@ -65,7 +63,7 @@ class ParticleRacingGym(gymnasium.Env):
     def step(self, action):
         if self._state is None:
             raise RuntimeError("call reset() before step().")
-        action = check_actions(np.asarray(action).astype(np.int64) if np.ndim(action) == 0 else action, self.env.num_actions)
+        action = check_actions(action, self.env.num_actions)
         obs, self._state, reward, terminated, truncated, info = self._step(
             jax.random.key(0), self._state, np.int32(action), self.params
         )
@@ -85,12 +83,3 @@ class ParticleRacingGym(gymnasium.Env):
     def world(self) -> Track | None:
         """The track of the current episode."""
         return None if self._state is None else self._state.world
-
-
-def register_envs() -> None:
-    """Register the worldagent envs with Gymnasium (idempotent)."""
-    if RACING_ID not in gymnasium.registry:
-        gymnasium.register(id=RACING_ID, entry_point="worldagent.envs.adapters:ParticleRacingGym")
-
-
-register_envs()

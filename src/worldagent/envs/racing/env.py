@@ -110,12 +110,13 @@ def locate(centreline: jax.Array, position: jax.Array, near: jax.Array, radius: 
     Returns:
         (segment i32, arc f32 lap fraction in [0, 1), distance f32 to the centreline).
     """
+    centreline = jnp.asarray(centreline)
     num_points = centreline.shape[0]
     candidates = (near + jnp.arange(-radius, radius + 1)) % num_points
     distances, t = _closest_on_segments(position, centreline[candidates], centreline[(candidates + 1) % num_points])
     best = jnp.argmin(distances)
     segment = candidates[best]
-    arc = (segment + t[best]) / num_points
+    arc = ((segment + t[best]) / num_points) % 1.0
     return segment, arc, distances[best]
 
 
@@ -176,10 +177,10 @@ class ParticleRacing(Environment):
     def reset(self, key: jax.Array, world: Track, params: RacingParams) -> tuple[jax.Array, RacingState]:
         """Start an episode at the start line (centreline point 0), at rest. ``key`` is unused."""
         self.check_world(world)
-        centreline = jnp.asarray(world.centreline, jnp.float32)
+        world = jax.tree_util.tree_map(jnp.asarray, world)
         state = RacingState(
             world=world,
-            position=centreline[0],
+            position=world.centreline[0].astype(jnp.float32),
             velocity=jnp.zeros(2, jnp.float32),
             segment=jnp.int32(0),
             arc=jnp.float32(0.0),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from worldagent.envs.racing import tracks as T
-from worldagent.envs.racing.world import HALF_WIDTH, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, pixel_centres, to_pixel
+from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, pixel_centres, to_pixel
 from worldagent.errors import WorldagentError
 
 # Seeds 36 and 313 are rejected once and twice by upstream before a track is accepted.
@@ -71,7 +71,7 @@ def test_tracks_are_closed_evenly_sampled_and_inside_bounds(tracks, track):
     arc = steps.max(axis=1, keepdims=True)  # chords of equal arc-length steps; corners shorten a few
     assert np.all(steps >= 0.97 * arc) and np.all(np.median(steps, axis=1) > 0.999 * arc[:, 0])
     assert np.all(np.abs(steps[:, -1] - np.median(steps, axis=1)) < 0.03 * arc[:, 0])  # closing step too
-    assert np.abs(c).max() < 1 - HALF_WIDTH
+    assert np.abs(c).max() < MAX_EXTENT
     area = 0.5 * (c[..., 0] * np.roll(c[..., 1], -1, 1) - np.roll(c[..., 0], -1, 1) * c[..., 1]).sum(-1)
     assert np.all(area > 0)  # counter-clockwise, as upstream drives
     tracks.validate()
@@ -93,7 +93,7 @@ def test_statistics_fall_in_documented_ranges():
         assert abs(values.mean() - mean) < 4 * std / np.sqrt(200), name
         spread = high - low
         assert low - 0.25 * spread <= values.min() and values.max() <= high + 0.25 * spread, name
-    assert stats["max_coord"].max() < 1 - HALF_WIDTH
+    assert stats["max_coord"].max() < MAX_EXTENT
     assert set(stats["summary"]) == {"points", "length", "turning", "max_coord"}
     loops = T.upstream_loops([3, 4])
     np.testing.assert_array_equal(T.track_statistics(loops)["length"], T.track_statistics([3, 4])["length"])

@@ -11,7 +11,7 @@ from worldagent.envs.core import rollout, step_autoreset
 from worldagent.envs.racing.driver import driver_policy
 from worldagent.envs.racing.env import ParticleRacing, RacingParams, episode_metrics, locate, split_observation, wrap_half
 from worldagent.envs.racing.tracks import rasterize
-from worldagent.envs.racing.world import HALF_WIDTH, RASTER_SIZE, ROAD_SIZE, Track
+from worldagent.envs.racing.world import HALF_WIDTH, RASTER_SIZE, ROAD_SIZE, Track, pack_road, to_pixel, unpack_road
 from worldagent.errors import WorldagentError
 
 ENV = ParticleRacing()
@@ -26,7 +26,7 @@ def oval_track(a: float = 0.6, b: float = 0.4, num_points: int = 256) -> Track:
     """An analytic ellipse, point 0 at its east end (a, 0), driven counter-clockwise."""
     theta = np.linspace(0.0, 2 * np.pi, num_points, endpoint=False)
     centreline = np.stack([a * np.cos(theta), b * np.sin(theta)], axis=-1).astype(np.float32)
-    return Track(centreline, rasterize(centreline[None], RASTER_SIZE)[0], rasterize(centreline[None], ROAD_SIZE)[0])
+    return Track(centreline, rasterize(centreline, RASTER_SIZE), pack_road(rasterize(centreline, ROAD_SIZE)))
 
 
 @pytest.fixture(scope="module")
@@ -188,3 +188,22 @@ def test_bad_inputs_get_one_line_errors(track, oval):
             ENV.reset(KEY, bad_shape, PARAMS) if "shape" in message else ENV.step(KEY, state, 9, PARAMS)
         except WorldagentError as error:
             assert "\n" not in str(error)
+
+
+def test_observation_window_is_the_unpacked_road_around_the_agent(tracks):
+    """The bit-packed window equals a plain slice of the unpacked mask, at every column phase."""
+    world = jax.tree_util.tree_map(lambda x: x[2], tracks)
+    road = unpack_road(world.road)
+    _, state = ENV.reset(KEY, world, PARAMS)
+    observe = jax.jit(ENV.observe)
+    for position in np.asarray(world.centreline[::7]):
+        obs = observe(state.replace(position=jnp.asarray(position)), PARAMS)
+        window = split_observation(np.asarray(obs), ENV.window)[0]
+        row, col = np.round(to_pixel(position, ROAD_SIZE)).astype(int) - ENV.window // 2
+        np.testing.assert_array_equal(window, road[row : row + ENV.window, col : col + ENV.window])
+
+
+def test_pack_road_round_trips(track):
+    mask = unpack_road(track.road)
+    assert mask.shape == (ROAD_SIZE, ROAD_SIZE) and mask.any()
+    np.testing.assert_array_equal(pack_road(mask), track.road)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from worldagent.envs.racing import tracks as T
-from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, pixel_centres, to_pixel
+from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, pixel_centres, to_pixel, unpack_road
 from worldagent.errors import WorldagentError
 
 # Seeds 36 and 313 are rejected once and twice by upstream before a track is accepted.
@@ -66,7 +66,7 @@ def test_tracks_are_closed_evenly_sampled_and_inside_bounds(tracks, track):
     c = np.asarray(tracks.centreline, dtype=np.float64)
     assert tracks.centreline.dtype == np.float32 and c.shape == (8, NUM_POINTS, 2)
     assert tracks.raster.shape == (8, RASTER_SIZE, RASTER_SIZE) and tracks.raster.dtype == bool
-    assert tracks.road.shape == (8, ROAD_SIZE, ROAD_SIZE) and tracks.road.dtype == bool
+    assert tracks.road.shape == (8, ROAD_SIZE, ROAD_SIZE // 32) and tracks.road.dtype == np.uint32
     steps = np.linalg.norm(np.roll(c, -1, axis=1) - c, axis=-1)  # the closing step K-1 -> 0 included
     arc = steps.max(axis=1, keepdims=True)  # chords of equal arc-length steps; corners shorten a few
     assert np.all(steps >= 0.97 * arc) and np.all(np.median(steps, axis=1) > 0.999 * arc[:, 0])
@@ -108,7 +108,7 @@ def test_raster_orientation_top_rows_are_positive_y(tracks):
     assert rows.max() < 32 and rows.min() > 0
     c = np.asarray(tracks.centreline[0], dtype=np.float64)
     top, bottom = c[np.argmax(c[:, 1])], c[np.argmin(c[:, 1])]
-    for size, grid in ((RASTER_SIZE, tracks.raster[0]), (ROAD_SIZE, tracks.road[0])):
+    for size, grid in ((RASTER_SIZE, tracks.raster[0]), (ROAD_SIZE, unpack_road(tracks.road[0]))):
         row, col = np.rint(to_pixel(top, size)).astype(int)
         assert grid[row, col] and row - np.flatnonzero(grid.any(axis=1)).min() <= 1
         assert row < np.rint(to_pixel(bottom, size))[0] and row < size // 2
@@ -118,7 +118,7 @@ def test_raster_orientation_top_rows_are_positive_y(tracks):
 def test_raster_matches_exact_distance_rule(tracks, index):
     c = tracks.centreline[index]
     np.testing.assert_array_equal(tracks.raster[index], exact_raster(c, RASTER_SIZE))
-    np.testing.assert_array_equal(tracks.road[index], exact_raster(c, ROAD_SIZE))
+    np.testing.assert_array_equal(unpack_road(tracks.road[index]), exact_raster(c, ROAD_SIZE))
 
 
 @pytest.mark.parametrize(

@@ -14,7 +14,7 @@ road" (no shortcuts). The radius covers the largest distance the particle can mo
 (``force / friction``) on the shortest tracks with margin; ``tests/envs/racing`` checks it.
 
 Observation (f32[W·W + 4]): the ``W×W`` window of the world's 128×128 road mask around the
-agent (1 = road, 0 = grass, row 0 to the north), flattened, then the position (x, y) in
+agent (1 = road, 0 = grass, row 0 to the north, column 0 to the west), flattened, then the position (x, y) in
 normalised coordinates and the velocity divided by the top speed ``force / friction``.
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 from flax import struct
 
 from worldagent.envs.core import Environment, check_actions, check_finite, check_shape
-from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, Track
+from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, NUM_POINTS, RASTER_SIZE, ROAD_SIZE, ROAD_WORDS, Track
 from worldagent.errors import WorldagentError
 
 # Unit force directions of the four actions: +x (east), -x (west), +y (north), -y (south).
@@ -168,7 +168,7 @@ class ParticleRacing(Environment):
             raise WorldagentError(f"world is a {type(world).__name__}; expected a racing Track (see generate_tracks).")
         check_shape("track centreline", world.centreline, (self.num_points, 2))
         check_shape("track raster", world.raster, (RASTER_SIZE, RASTER_SIZE))
-        check_shape("track road mask", world.road, (ROAD_SIZE, ROAD_SIZE))
+        check_shape("track road mask", world.road, (ROAD_SIZE, ROAD_WORDS))
         if _is_concrete(world.centreline):
             world.validate()
 
@@ -239,13 +239,27 @@ class ParticleRacing(Environment):
 
     def observe(self, state: RacingState, params: RacingParams) -> jax.Array:
         """f32[W·W + 4]: road window around the agent, position, velocity / top speed."""
-        row_col = _to_pixel_jnp(state.position, ROAD_SIZE)
-        start = jnp.round(row_col).astype(jnp.int32) - self.window // 2
-        window = jax.lax.dynamic_slice(state.world.road, (start[0], start[1]), (self.window, self.window))
+        window = road_window(state.world.road, state.position, self.window)
         top_speed = params.force / params.friction
         return jnp.concatenate(
             [window.reshape(-1).astype(jnp.float32), state.position, state.velocity / top_speed]
         ).astype(jnp.float32)
+
+
+def road_window(road: jax.Array, position: jax.Array, window: int) -> jax.Array:
+    """u32[W, W] 0/1 on-road pixels of the ``W×W`` window centred on ``position`` (W <= 32).
+
+    ``road`` is bit-packed (``world.pack_road``): the window's rows are one contiguous slice of
+    whole packed rows; each row's W bits are then shifted out of the one or two words they span.
+    ``Track.validate``'s ``MAX_EXTENT`` keeps the window inside the mask.
+    """
+    start = jnp.round(_to_pixel_jnp(position, ROAD_SIZE)).astype(jnp.int32) - window // 2
+    rows = jax.lax.dynamic_slice(road, (start[0], 0), (window, road.shape[-1]))
+    word, shift = start[1] // 32, (start[1] % 32).astype(jnp.uint32)
+    low = jnp.take(rows, word, axis=1, mode="clip")
+    high = jnp.take(rows, word + 1, axis=1, mode="fill", fill_value=0)
+    bits = (low >> shift) | jnp.where(shift > 0, high << ((32 - shift) % 32), 0)
+    return (bits[:, None] >> jnp.arange(window, dtype=jnp.uint32)) & 1
 
 
 def episode_metrics(state: RacingState) -> dict[str, jax.Array]:

@@ -43,6 +43,7 @@ from worldagent.envs.racing.world import (
     TRACK_TURN_RATE,
     UPSTREAM_SCALE,
     Track,
+    pack_road,
     pixel_centres,
     to_pixel,
 )
@@ -339,7 +340,8 @@ def generate_tracks(seeds, num_points: int = NUM_POINTS) -> Track:
 
     Returns:
         ``Track`` with centreline f32[B, K, 2] (the upstream loop resampled evenly by arc
-        length, divided by ``PLAYFIELD``), raster bool[B, 64, 64] and road bool[B, 128, 128].
+        length, divided by ``PLAYFIELD``), raster bool[B, 64, 64] and road uint32[B, 128, 4]
+        (the 128×128 on-road mask, bit-packed with ``world.pack_road``).
         The same seeds always give identical arrays.
     """
     if isinstance(num_points, bool) or not isinstance(num_points, (int, np.integer)) or num_points < 8:
@@ -347,11 +349,12 @@ def generate_tracks(seeds, num_points: int = NUM_POINTS) -> Track:
     loops = upstream_loops(seeds)
     centreline = np.stack([resample_loop(loop[:, 2:], num_points) for loop in loops]) / PLAYFIELD
     centreline = centreline.astype(np.float32)
-    return Track(centreline=centreline, raster=rasterize(centreline, RASTER_SIZE), road=rasterize(centreline, ROAD_SIZE))
+    road = pack_road(rasterize(centreline, ROAD_SIZE))
+    return Track(centreline=centreline, raster=rasterize(centreline, RASTER_SIZE), road=road)
 
 
 def generate_track(seed: int, num_points: int = NUM_POINTS) -> Track:
-    """One CarRacing track (no batch axis): centreline f32[K, 2], raster bool[64, 64], road bool[128, 128]."""
+    """One CarRacing track (no batch axis): centreline f32[K, 2], raster bool[64, 64], road uint32[128, 4]."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise WorldagentError(f"seed={seed!r} is not an integer; pass a whole number >= 0.")
     batch = generate_tracks([seed], num_points)

@@ -32,6 +32,7 @@ HALF_WIDTH = TRACK_WIDTH / PLAYFIELD  # 0.02 in normalised coordinates
 NUM_POINTS = 256  # centreline points per track
 RASTER_SIZE = 64  # the VAE's input (paper §5.2.1)
 ROAD_SIZE = 128  # the env's on-road mask, from which observation windows are cut
+ROAD_WORDS = ROAD_SIZE // 32  # the road mask is stored bit-packed: 32 pixels per uint32 word
 # Tracks must stay inside |x|, |y| <= MAX_EXTENT so that the env's observation window (±0.125
 # with the default 16-pixel window), the road's half-width and one step of overshoot stay on
 # the road mask. CarRacing's tracks reach at most 0.722 (measured over seeds 0..9999).
@@ -47,7 +48,9 @@ class Track:
             in driving order (counter-clockwise, as upstream); point 0 is the start line and
             the loop closes from point K-1 back to point 0.
         raster: bool[64, 64] on-road pixels, the VAE's input (row 0 at the top).
-        road: bool[128, 128] on-road pixels at the env's resolution, for observation windows.
+        road: uint32[128, 4] on-road pixels at the env's resolution, bit-packed (``pack_road``):
+            bit k of ``road[r, j]`` is pixel ``(r, 32·j + k)``. Packing makes a world 8× smaller
+            and lets the env cut its observation window as one contiguous 16-row read.
     """
 
     centreline: jax.Array
@@ -66,12 +69,14 @@ class Track:
                 f"track centreline has shape {centreline.shape}; expected (K, 2) with K >= 8 points."
             )
         batch = centreline.shape[:-2]
-        for name, value in (("raster", self.raster), ("road", self.road)):
-            shape = np.shape(value)
-            if shape[:-2] != batch or len(shape) != len(batch) + 2 or shape[-1] != shape[-2]:
-                raise WorldagentError(
-                    f"track {name} has shape {shape}; expected {batch + ('R', 'R')} (square, same batch as the centreline)."
-                )
+        for name, value, want in (
+            ("raster", self.raster, (RASTER_SIZE, RASTER_SIZE)),
+            ("road", self.road, (ROAD_SIZE, ROAD_WORDS)),
+        ):
+            if np.shape(value) != batch + want:
+                raise WorldagentError(f"track {name} has shape {np.shape(value)}; expected {batch + want} (see generate_tracks).")
+        if np.asarray(self.road).dtype != np.uint32:
+            raise WorldagentError(f"track road has dtype {np.asarray(self.road).dtype}; pack the bool mask with pack_road().")
         if np.abs(centreline).max() > MAX_EXTENT:
             raise WorldagentError(
                 f"track reaches {np.abs(centreline).max():.3f}, beyond the playable square |x|, |y| <= {MAX_EXTENT}; "
@@ -80,6 +85,22 @@ class Track:
         steps = np.linalg.norm(np.diff(centreline, axis=-2, append=centreline[..., :1, :]), axis=-1)
         if np.any(steps.max(axis=-1) > 4 * HALF_WIDTH):
             raise WorldagentError("track centreline is not a closed, evenly sampled loop; resample it with resample_loop().")
+
+
+def pack_road(mask) -> np.ndarray:
+    """bool[..., R, R] -> uint32[..., R, R/32]: bit k of word j of a row is column ``32·j + k``."""
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape[-1] % 32:
+        raise WorldagentError(f"road mask has {mask.shape[-1]} columns; pack_road needs a multiple of 32.")
+    bits = mask.reshape(*mask.shape[:-1], mask.shape[-1] // 32, 32).astype(np.uint64)
+    return (bits << np.arange(32, dtype=np.uint64)).sum(axis=-1).astype(np.uint32)
+
+
+def unpack_road(packed) -> np.ndarray:
+    """uint32[..., R, W] -> bool[..., R, 32·W], the inverse of ``pack_road``."""
+    packed = np.asarray(packed, dtype=np.uint32)
+    bits = (packed[..., None] >> np.arange(32, dtype=np.uint32)) & 1
+    return bits.reshape(*packed.shape[:-1], packed.shape[-1] * 32).astype(bool)
 
 
 def to_pixel(xy: np.ndarray, size: int) -> np.ndarray:

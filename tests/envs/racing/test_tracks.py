@@ -108,7 +108,7 @@ def test_raster_orientation_top_rows_are_positive_y(tracks):
     assert rows.max() < 32 and rows.min() > 0
     c = np.asarray(tracks.centreline[0], dtype=np.float64)
     top, bottom = c[np.argmax(c[:, 1])], c[np.argmin(c[:, 1])]
-    for size, grid in ((RASTER_SIZE, tracks.raster[0]), (ROAD_SIZE, unpack_road(tracks.road[0]))):
+    for size, grid in ((RASTER_SIZE, T.rasterize(tracks.centreline[0], RASTER_SIZE)), (ROAD_SIZE, unpack_road(tracks.road[0]))):
         row, col = np.rint(to_pixel(top, size)).astype(int)
         assert grid[row, col] and row - np.flatnonzero(grid.any(axis=1)).min() <= 1
         assert row < np.rint(to_pixel(bottom, size))[0] and row < size // 2
@@ -117,8 +117,19 @@ def test_raster_orientation_top_rows_are_positive_y(tracks):
 @pytest.mark.parametrize("index", [0, 3, 6])
 def test_raster_matches_exact_distance_rule(tracks, index):
     c = tracks.centreline[index]
-    np.testing.assert_array_equal(tracks.raster[index], exact_raster(c, RASTER_SIZE))
+    np.testing.assert_array_equal(T.rasterize(c, RASTER_SIZE), exact_raster(c, RASTER_SIZE))
     np.testing.assert_array_equal(unpack_road(tracks.road[index]), exact_raster(c, ROAD_SIZE))
+
+
+@pytest.mark.parametrize("index", [0, 3, 6])
+def test_raster_is_the_footprint_road_and_enclosed_area(tracks, index):
+    from matplotlib.path import Path as PolygonPath
+
+    c = np.asarray(tracks.centreline[index], np.float64)
+    inside = PolygonPath(c).contains_points(pixel_centres(RASTER_SIZE).reshape(-1, 2)).reshape(RASTER_SIZE, RASTER_SIZE)
+    np.testing.assert_array_equal(T.fill_interior(c[None], RASTER_SIZE)[0], inside)
+    np.testing.assert_array_equal(tracks.raster[index], inside | exact_raster(c, RASTER_SIZE))
+    assert inside.sum() > 10 * exact_raster(c, RASTER_SIZE).sum() / 4  # filled, not just the road
 
 
 @pytest.mark.parametrize(

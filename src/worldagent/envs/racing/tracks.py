@@ -331,6 +331,42 @@ def rasterize(centrelines, size: int) -> np.ndarray:
     return out
 
 
+def fill_interior(centrelines, size: int) -> np.ndarray:
+    """Pixels whose centre lies inside the closed loop (even-odd rule), bool[B, size, size].
+
+    Scanline parity, vectorised over the batch: for each pixel row, every loop edge that crosses
+    the row's centre line (half-open in y, so a vertex is never counted twice) adds one to the
+    first pixel column right of the crossing; a running sum along the row gives, for each pixel,
+    the number of crossings to its left, and odd counts are inside.
+
+    Args:
+        centrelines: f[B, K, 2] normalised closed loops.
+        size: raster side in pixels.
+    """
+    lines = np.asarray(centrelines, dtype=np.float64)
+    start, end = lines, np.roll(lines, -1, axis=1)
+    row_y = pixel_centres(size)[:, 0, 1]  # [size]
+    y0, y1 = start[:, None, :, 1], end[:, None, :, 1]  # [B, 1, K]
+    crosses = (y0 > row_y[None, :, None]) != (y1 > row_y[None, :, None])  # [B, size, K]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = start[:, None, :, 0] + (row_y[None, :, None] - y0) * (end[:, None, :, 0] - start[:, None, :, 0]) / (y1 - y0)
+    first_right = np.clip(np.floor((x + 1.0) * size / 2.0 - 0.5) + 1, 0, size).astype(np.int64)  # x < centre of this col
+    batch = len(lines)
+    bins = (np.arange(batch)[:, None, None] * size + np.arange(size)[None, :, None]) * (size + 1) + first_right
+    counts = np.bincount(bins[crosses], minlength=batch * size * (size + 1)).reshape(batch, size, size + 1)
+    return (np.cumsum(counts[..., :size], axis=-1) % 2).astype(bool)
+
+
+def footprint(centrelines, size: int) -> np.ndarray:
+    """The track's footprint, bool[B, size, size]: its road and the area the road encloses.
+
+    This is the VAE's input (``Track.raster``). A filled shape, unlike the 1–2 pixel wide road,
+    overlaps a lot with the footprints of similar tracks, which is what lets the VAE learn a
+    smooth latent space and the repair step find the most similar track (paper §5.2.1).
+    """
+    return rasterize(centrelines, size) | fill_interior(centrelines, size)
+
+
 def generate_tracks(seeds, num_points: int = NUM_POINTS) -> Track:
     """A batch of CarRacing tracks as one ``Track`` of numpy arrays (paper §5.2.1).
 
@@ -340,7 +376,8 @@ def generate_tracks(seeds, num_points: int = NUM_POINTS) -> Track:
 
     Returns:
         ``Track`` with centreline f32[B, K, 2] (the upstream loop resampled evenly by arc
-        length, divided by ``PLAYFIELD``), raster bool[B, 64, 64] and road uint32[B, 128, 4]
+        length, divided by ``PLAYFIELD``), raster bool[B, 64, 64] (the ``footprint``, the VAE's
+        input) and road uint32[B, 128, 4]
         (the 128×128 on-road mask, bit-packed with ``world.pack_road``).
         The same seeds always give identical arrays.
     """
@@ -350,7 +387,7 @@ def generate_tracks(seeds, num_points: int = NUM_POINTS) -> Track:
     centreline = np.stack([resample_loop(loop[:, 2:], num_points) for loop in loops]) / PLAYFIELD
     centreline = centreline.astype(np.float32)
     road = pack_road(rasterize(centreline, ROAD_SIZE))
-    return Track(centreline=centreline, raster=rasterize(centreline, RASTER_SIZE), road=road)
+    return Track(centreline=centreline, raster=footprint(centreline, RASTER_SIZE), road=road)
 
 
 def generate_track(seed: int, num_points: int = NUM_POINTS) -> Track:

@@ -47,7 +47,8 @@ class Track:
         centreline: f32[K, 2] normalised points of the closed loop, evenly spaced by arc length,
             in driving order (counter-clockwise, as upstream); point 0 is the start line and
             the loop closes from point K-1 back to point 0.
-        raster: bool[64, 64] on-road pixels, the VAE's input (row 0 at the top).
+        raster: bool[64, 64] the track's footprint, the VAE's input (row 0 at the top): the road
+            and the area it encloses (see ``tracks.footprint`` for why filled).
         road: uint32[128, 4] on-road pixels at the env's resolution, bit-packed (``pack_road``):
             bit k of ``road[r, j]`` is pixel ``(r, 32·j + k)``. Packing makes a world 8× smaller
             and lets the env cut its observation window as one contiguous 16-row read.

@@ -59,6 +59,7 @@ MEASURED_STATISTICS = {  # track_statistics over seeds 0..9999: (mean, std, min,
     "turning": (13.96, 2.53, 6.52, 25.09),
     "max_coord": (0.6846, 0.0147, 0.6759, 0.7219),
 }
+_FILL_CHUNK = 256  # tracks filled at once
 _CHUNK = 2048  # tracks walked at once (bounds the f64[2500, 4, chunk] history to ~160 MB)
 
 
@@ -344,6 +345,8 @@ def fill_interior(centrelines, size: int) -> np.ndarray:
         size: raster side in pixels.
     """
     lines = np.asarray(centrelines, dtype=np.float64)
+    if len(lines) > _FILL_CHUNK:  # bounded temporaries: f64[chunk, size, K]
+        return np.concatenate([fill_interior(lines[i : i + _FILL_CHUNK], size) for i in range(0, len(lines), _FILL_CHUNK)])
     start, end = lines, np.roll(lines, -1, axis=1)
     row_y = pixel_centres(size)[:, 0, 1]  # [size]
     y0, y1 = start[:, None, :, 1], end[:, None, :, 1]  # [B, 1, K]

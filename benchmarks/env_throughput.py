@@ -1,13 +1,16 @@
-"""Env steps per second of jitted, vmapped random-action rollouts, and of Gymnasium's CarRacing.
+"""Steps per second of jitted, vmapped random-action rollouts of both envs, and of CarRacing.
 
-    python benchmarks/env_throughput.py                 # racing at batch 1, 168, 4096 (+ CarRacing-v3)
-    python benchmarks/env_throughput.py --batches 4096 --steps 2000 --no-carracing
+    python benchmarks/env_throughput.py                      # racing at 1, 168, 4096 (+ CarRacing-v3),
+                                                             # harvest at 1, 168, 2048
+    python benchmarks/env_throughput.py --env racing --batches 4096 --steps 2000 --no-carracing
 
-Each env in a batch drives its own CarRacing track; actions are uniform random; episodes restart
-through ``core.step_autoreset`` as in training. Observations and rewards are folded into a
-checksum that the program returns, so XLA cannot skip computing them. Timing excludes
-compilation (one warm-up call) and takes the best of ``--repeats`` runs. Results go to
-``benchmarks/results/env_throughput-<backend>.json`` with the machine's description.
+Each env in a batch plays its own world (a CarRacing track; a generated harvest map, agent 0
+allowed to TAG as in §6.2.2); actions are uniform random; episodes restart through
+``core.step_autoreset`` as in training. Observations and rewards are folded into a checksum that
+the program returns, so XLA cannot skip computing them. Timing excludes compilation (one
+warm-up call) and takes the best of ``--repeats`` runs. Harvest is counted in agent-steps (one
+agent acting once; 4 per env-step). Results go to ``benchmarks/results/env_throughput-<backend>.json``
+with the machine's description.
 """
 
 from __future__ import annotations
@@ -25,17 +28,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import describe_machine, record  # noqa: E402
 
 from worldagent.envs.core import step_autoreset  # noqa: E402
+from worldagent.envs.harvest.env import NUM_AGENTS, Harvest, make_params  # noqa: E402
+from worldagent.envs.harvest.maps import generate_maps  # noqa: E402
 from worldagent.envs.racing.env import ParticleRacing  # noqa: E402
 from worldagent.envs.racing.tracks import generate_tracks  # noqa: E402
 
-DISTINCT_TRACKS = 512  # batches larger than this cycle through these tracks
+DISTINCT_WORLDS = 512  # batches larger than this cycle through these worlds
+DEFAULT_BATCHES = {"racing": "1,168,4096", "harvest": "1,168,2048"}
 
 
-def racing_rollout(batch: int, steps: int):
+def rollout(env, params, pool, batch: int, steps: int, action_shape: tuple = ()):
     """A jitted ``run(key) -> checksum`` of ``steps`` random-action steps in ``batch`` envs."""
-    env = ParticleRacing()
-    params = env.default_params
-    pool = generate_tracks(np.arange(min(batch, DISTINCT_TRACKS)))
     worlds = jax.tree_util.tree_map(lambda x: jnp.asarray(np.resize(x, (batch, *x.shape[1:]))), pool)
     step_all = jax.vmap(lambda k, s, a: step_autoreset(env, k, s, a, params))
 
@@ -47,14 +50,25 @@ def racing_rollout(batch: int, steps: int):
         def one_step(carry, step_key):
             state, checksum = carry
             key_action, key_env = jax.random.split(step_key)
-            actions = jax.random.randint(key_action, (batch,), 0, env.num_actions)
+            actions = jax.random.randint(key_action, (batch, *action_shape), 0, env.num_actions)
             obs, state, reward, _, _, _ = step_all(jax.random.split(key_env, batch), state, actions)
-            return (state, checksum + obs.sum() + reward.sum()), None
+            return (state, checksum + obs.sum(dtype=jnp.float32) + reward.sum()), None
 
-        (_, checksum), _ = jax.lax.scan(one_step, (state, obs.sum()), jax.random.split(key_steps, steps))
+        (_, checksum), _ = jax.lax.scan(one_step, (state, obs.sum(dtype=jnp.float32)), jax.random.split(key_steps, steps))
         return checksum
 
     return run
+
+
+def racing_rollout(batch: int, steps: int):
+    env = ParticleRacing()
+    return rollout(env, env.default_params, generate_tracks(np.arange(min(batch, DISTINCT_WORLDS))), batch, steps)
+
+
+def harvest_rollout(batch: int, steps: int):
+    params = make_params(can_tag=[True, False, False, False])
+    pool = generate_maps(np.arange(min(batch, DISTINCT_WORLDS)))
+    return rollout(Harvest(), params, pool, batch, steps, (NUM_AGENTS,))
 
 
 def time_rollout(run, batch: int, steps: int, repeats: int) -> float:
@@ -91,7 +105,8 @@ def time_carracing(steps: int) -> float | None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--batches", default="1,168,4096", help="comma-separated batch sizes")
+    parser.add_argument("--env", choices=["racing", "harvest", "all"], default="all")
+    parser.add_argument("--batches", default=None, help="comma-separated batch sizes (default: racing 1,168,4096; harvest 1,168,2048)")
     parser.add_argument("--steps", type=int, default=1000, help="steps per rollout (batch 1 uses 10x)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--carracing-steps", type=int, default=1000)
@@ -99,18 +114,25 @@ def main() -> None:
     args = parser.parse_args()
 
     print(describe_machine())
-    racing = {}
-    for batch in (int(b) for b in args.batches.split(",")):
-        steps = args.steps * (10 if batch == 1 else 1)
-        rate = time_rollout(racing_rollout(batch, steps), batch, steps, args.repeats)
-        racing[str(batch)] = round(rate)
-        print(f"ParticleRacing  batch {batch:>5}: {rate:>14,.0f} steps/s")
-    result = {"racing_steps_per_s": racing, "steps": args.steps, "repeats": args.repeats}
-    if not args.no_carracing:
+    result = {"steps": args.steps, "repeats": args.repeats}
+    envs = ["racing", "harvest"] if args.env == "all" else [args.env]
+    for env in envs:
+        rates = {}
+        for batch in (int(b) for b in (args.batches or DEFAULT_BATCHES[env]).split(",")):
+            steps = args.steps * (10 if batch == 1 else 1)
+            make = racing_rollout if env == "racing" else harvest_rollout
+            rate = time_rollout(make(batch, steps), batch, steps, args.repeats)
+            if env == "harvest":
+                rate *= NUM_AGENTS  # agent-steps
+            rates[str(batch)] = round(rate)
+            unit = "steps/s" if env == "racing" else "agent-steps/s"
+            print(f"{env:8s} batch {batch:>5}: {rate:>14,.0f} {unit}")
+        result["racing_steps_per_s" if env == "racing" else "harvest_agent_steps_per_s"] = rates
+    if "racing" in envs and not args.no_carracing:
         rate = time_carracing(args.carracing_steps)
         if rate is not None:
             result["carracing_v3_steps_per_s"] = round(rate, 1)
-            best = max(racing.values())
+            best = max(result["racing_steps_per_s"].values())
             print(f"CarRacing-v3    batch     1: {rate:>14,.1f} steps/s  (ParticleRacing best: {best / rate:,.0f}x)")
     print(f"recorded in {record('env_throughput', result)}")
 

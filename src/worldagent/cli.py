@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
+import numpy as np
 import typer
 from rich.console import Console
 
@@ -105,3 +106,129 @@ def drive(
         f"return {metrics['return']:.1f}, steps {metrics['steps']}, progress {metrics['progress']:.2f}, "
         f"crashed {metrics['crashed']}, lap {metrics['lap_completed']} -> {out}"
     )
+
+
+@app.command()
+@friendly_errors
+def maps(
+    n: int = typer.Option(16, "--n", help="Number of Resource Harvest maps to draw."),
+    seed: int = typer.Option(0, "--seed", help="Map i uses seed SEED + i."),
+    out: Path = typer.Option(Path("maps.png"), "--out", help="PNG file to write."),
+) -> None:
+    """Generate Resource Harvest maps (corner regions, walls, apple clusters) and draw them on one sheet."""
+    from worldagent.envs.harvest.maps import generate_maps, seeds_from
+    from worldagent.envs.harvest.render import draw_map_sheet
+
+    if n < 1:
+        raise WorldagentError(f"--n is {n}; ask for at least one map.")
+    draw_map_sheet(generate_maps(seeds_from(seed, n)), out)
+    console.print(f"wrote {n} maps to {out}")
+
+
+ENV_HELP = "Environment: racing or harvest."
+
+
+@app.command()
+@friendly_errors
+def dataset(
+    env: str = typer.Argument(..., help=ENV_HELP),
+    n: int = typer.Option(10_000, "--n", help="Number of worlds (the paper: 10,000)."),
+    seed: int = typer.Option(0, "--seed", help="World i uses generator seed SEED + i."),
+    out: Path = typer.Option(..., "--out", help="Dataset file to write (.npz)."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+) -> None:
+    """Generate a dataset of worlds with the environment's procedural generator (paper §5.2.1)."""
+    from worldagent.worlds.dataset import make_dataset
+
+    data = make_dataset(env, n, seed, progress=not quiet)
+    data.save(out)
+    console.print(f"wrote {len(data):,} {env} worlds to {out} (fingerprint {data.fingerprint})")
+
+
+generator_app = typer.Typer(help="Train, draw and assess the world generator G(z) (a VAE + repair).", no_args_is_help=True)
+app.add_typer(generator_app, name="generator")
+
+
+@generator_app.command("train")
+@friendly_errors
+def generator_train(
+    env: str = typer.Argument(..., help=ENV_HELP),
+    out: Path = typer.Option(..., "--out", help="Generator directory (resumed if it holds an unfinished run)."),
+    dataset_path: Path = typer.Option(None, "--dataset", help="Dataset file; default: OUT/dataset.npz, made if missing."),
+    n: int = typer.Option(10_000, "--n", help="Worlds in a dataset made here."),
+    seed: int = typer.Option(0, "--seed", help="First generator seed of a dataset made here."),
+    epochs: int = typer.Option(25, "--epochs", help="Training epochs."),
+    beta: float = typer.Option(1.0, "--beta", help="Weight of the KL term of the ELBO."),
+    latent: int = typer.Option(10, "--latent", help="Latent dimensions (the paper: 10)."),
+    learning_rate: float = typer.Option(1e-3, "--lr", help="Adam step size."),
+    batch_size: int = typer.Option(128, "--batch-size", help="Worlds per minibatch."),
+    apples: int = typer.Option(None, "--apples", help="Harvest: apples per generated map (default: the dataset's median)."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
+) -> None:
+    """Train the VAE of G(z) on a dataset of worlds and save the generator (paper §4.2, Figure 3)."""
+    from worldagent.worlds.dataset import WorldDataset, make_dataset
+    from worldagent.worlds.generator import build_generator, save_generator
+    from worldagent.worlds.kinds import world_kind
+    from worldagent.worlds.vae import VAEConfig, train_vae
+
+    world_kind(env)
+    config = VAEConfig(latent_dim=latent, beta=beta, learning_rate=learning_rate, batch_size=batch_size, epochs=epochs)
+    config.validate()
+    if dataset_path is None:
+        dataset_path = out / "dataset.npz"
+        if not dataset_path.exists():
+            make_dataset(env, n, seed, progress=not quiet).save(dataset_path)
+    data = WorldDataset.load(dataset_path, env=env)
+    vae = train_vae(data, config, progress=not quiet, checkpoint_dir=out)
+    save_generator(out, vae, dataset_path, build_generator(vae, data, apples))
+    last = vae.history[-1]
+    console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}")
+
+
+@generator_app.command("show")
+@friendly_errors
+def generator_show(
+    directory: Path = typer.Argument(..., help="Generator directory (from `generator train`)."),
+    out: Path = typer.Option(None, "--out", help="Folder for traversals.png and reconstructions.png (default: the generator directory)."),
+    count: int = typer.Option(8, "--count", help="Held-out worlds to reconstruct."),
+) -> None:
+    """Draw latent traversals of G(z) and reconstructions of held-out worlds next to their originals."""
+    from worldagent.worlds.generator import load_generator
+    from worldagent.worlds.pictures import reconstruction_sheet, traversal_sheet
+
+    generator, vae, data = load_generator(directory)
+    out = out or directory
+    indices = vae.holdout_indices[:count] if len(vae.holdout_indices) else np.arange(min(count, len(data)))
+    paths = [traversal_sheet(generator, out / "traversals.png"), reconstruction_sheet(generator, data, indices, out / "reconstructions.png")]
+    console.print("wrote " + ", ".join(str(p) for p in paths))
+
+
+@generator_app.command("report")
+@friendly_errors
+def generator_report(
+    directory: Path = typer.Argument(..., help="Generator directory (from `generator train`)."),
+    samples: int = typer.Option(10_000, "--samples", help="Draws z ~ N(0, I) for coverage / validity."),
+    seed: int = typer.Option(0, "--seed", help="Seed of those draws."),
+) -> None:
+    """Measure the generator: reconstruction, self-mapping and coverage (racing), validity (harvest)."""
+    import json
+
+    import jax
+
+    from worldagent.worlds.generator import load_generator
+    from worldagent.worlds.quality import harvest_figures, racing_figures, reconstruction
+    from worldagent.worlds.vae import split_holdout
+
+    if samples < 1:
+        raise WorldagentError(f"--samples {samples}; draw at least 1 latent.")
+    generator, vae, data = load_generator(directory)
+    train, held = split_holdout(len(data), vae.config.holdout, vae.config.seed)
+    figures = {"env": data.env, "worlds": len(data), "reconstruction": reconstruction(generator, data, held, train)}
+    key = jax.random.key(seed)
+    figures[data.env] = racing_figures(generator, data, samples, key) if data.env == "racing" else harvest_figures(generator, samples, key)
+    figures["training"] = {"epochs": len(vae.history), "final": vae.history[-1]}
+    path = directory / "quality.json"
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(figures, indent=1))
+    tmp.replace(path)
+    typer.echo(json.dumps(figures, indent=1))

@@ -1,5 +1,8 @@
 """Standard interfaces over the pure-JAX envs, so users can bring their own agents.
 
+``HarvestParallelEnv`` is a PettingZoo ``ParallelEnv`` of Resource Harvest (agents
+``agent_0..agent_3``, a new seeded map at every reset; see ``envs/harvest/pettingzoo_env.py``).
+
 ``ParticleRacingGym`` is a ``gymnasium.Env`` (registered as ``worldagent/ParticleRacing-v0`` by
 ``import worldagent``)
 that draws a new track from CarRacing's generator at every reset, seeded by Gymnasium's own
@@ -83,3 +86,12 @@ class ParticleRacingGym(gymnasium.Env):
     def world(self) -> Track | None:
         """The track of the current episode."""
         return None if self._state is None else self._state.world
+
+
+def __getattr__(name: str):
+    """``HarvestParallelEnv`` (PettingZoo) is re-exported here, imported only when asked for."""
+    if name == "HarvestParallelEnv":
+        from worldagent.envs.harvest.pettingzoo_env import HarvestParallelEnv
+
+        return HarvestParallelEnv
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -93,8 +93,8 @@ def pack_road(mask) -> np.ndarray:
     mask = np.asarray(mask, dtype=bool)
     if mask.shape[-1] % 32:
         raise WorldagentError(f"road mask has {mask.shape[-1]} columns; pack_road needs a multiple of 32.")
-    bits = mask.reshape(*mask.shape[:-1], mask.shape[-1] // 32, 32).astype(np.uint64)
-    return (bits << np.arange(32, dtype=np.uint64)).sum(axis=-1).astype(np.uint32)
+    packed = np.packbits(mask, axis=-1, bitorder="little")  # bit k of byte b is column 8b + k
+    return np.ascontiguousarray(packed).view("<u4").astype(np.uint32)
 
 
 def unpack_road(packed) -> np.ndarray:

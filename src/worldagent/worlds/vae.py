@@ -1,0 +1,299 @@
+"""The VAE over worlds (paper §3.1, §5.2.1, Figure 3): binary cells -> 10-d latent -> cells.
+
+Encoder: two fully connected hidden layers of 1024 and 512 units (ReLU) to a diagonal Gaussian
+``q(z|x)``; decoder: the transpose, 512 then 1024 units, to one Bernoulli logit per cell. The
+loss is the negative ELBO per world, ``E_q[-log p(x|z)] + β·KL(q(z|x) || N(0, I))`` (β = 1 is the
+plain VAE of Kingma & Welling, the paper's [20]). Training is Adam (optax), one jitted
+``lax.scan`` over the minibatches of an epoch, a held-out split, and a checkpoint after every
+epoch so a killed run resumes.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax import serialization
+
+from worldagent.errors import WorldagentError
+from worldagent.progress import progress_bar
+
+CHECKPOINT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class VAEConfig:
+    """Architecture and training settings (defaults: the paper's architecture).
+
+    Attributes:
+        latent_dim: size of z (paper: 10).
+        encoder: hidden layer widths of the encoder (paper: 1024, 512).
+        decoder: hidden layer widths of the decoder (paper: the transpose, 512, 1024).
+        beta: weight of the KL term (1: the standard ELBO).
+        warmup_epochs: the KL weight ramps linearly from 0 to ``beta`` over these first epochs
+            (KL annealing, Bowman et al. 2016): without it the thin roads of the racing rasters
+            let the decoder settle on the mean image and ignore z (posterior collapse).
+        learning_rate: Adam step size.
+        batch_size: worlds per minibatch.
+        epochs: passes over the training split.
+        holdout: fraction of the dataset held out for the quality figures.
+        seed: seed of the initialisation, the split, the shuffling and the sampling.
+    """
+
+    latent_dim: int = 10
+    encoder: tuple[int, ...] = (1024, 512)
+    decoder: tuple[int, ...] = (512, 1024)
+    beta: float = 1.0
+    warmup_epochs: int = 5
+    learning_rate: float = 1e-3
+    batch_size: int = 128
+    epochs: int = 25
+    holdout: float = 0.1
+    seed: int = 0
+
+    def validate(self) -> None:
+        """Raise ``WorldagentError`` for settings training cannot honour."""
+        if self.latent_dim < 1 or not self.encoder or not self.decoder or min(self.encoder + self.decoder) < 1:
+            raise WorldagentError("VAE layers and latent_dim must be positive; the paper uses encoder 1024-512, latent 10.")
+        if self.warmup_epochs < 0:
+            raise WorldagentError(f"warmup_epochs={self.warmup_epochs}; pass 0 or more.")
+        if self.beta < 0 or self.learning_rate <= 0 or self.batch_size < 1 or self.epochs < 1:
+            raise WorldagentError("beta must be >= 0 and learning_rate, batch_size and epochs positive.")
+        if not 0.0 <= self.holdout < 1.0:
+            raise WorldagentError(f"holdout={self.holdout}; pick a fraction in [0, 1).")
+
+
+class VAE(nn.Module):
+    """MLP VAE over ``cell_count`` binary cells."""
+
+    cell_count: int
+    latent_dim: int = 10
+    encoder: tuple[int, ...] = (1024, 512)
+    decoder: tuple[int, ...] = (512, 1024)
+
+    def setup(self):
+        self.encoder_layers = [nn.Dense(width) for width in self.encoder]
+        self.to_mean = nn.Dense(self.latent_dim)
+        self.to_log_var = nn.Dense(self.latent_dim)
+        self.decoder_layers = [nn.Dense(width) for width in self.decoder]
+        self.to_logits = nn.Dense(self.cell_count)
+
+    def encode(self, cells: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """f[B, D] cells -> (mean f32[B, L], log-variance f32[B, L]) of q(z|x)."""
+        h = cells.astype(jnp.float32)
+        for layer in self.encoder_layers:
+            h = nn.relu(layer(h))
+        return self.to_mean(h), self.to_log_var(h)
+
+    def decode(self, z: jax.Array) -> jax.Array:
+        """f[B, L] latents -> f32[B, D] Bernoulli logits of the cells."""
+        h = z
+        for layer in self.decoder_layers:
+            h = nn.relu(layer(h))
+        return self.to_logits(h)
+
+    def __call__(self, cells: jax.Array, key: jax.Array):
+        mean, log_var = self.encode(cells)
+        z = mean + jnp.exp(0.5 * log_var) * jax.random.normal(key, mean.shape)
+        return self.decode(z), mean, log_var
+
+
+def make_vae(cell_count: int, config: VAEConfig) -> VAE:
+    return VAE(cell_count, config.latent_dim, tuple(config.encoder), tuple(config.decoder))
+
+
+def negative_elbo(logits: jax.Array, cells: jax.Array, mean: jax.Array, log_var: jax.Array, beta: float):
+    """Per-world mean of ``-log p(x|z) + β·KL(q(z|x) || N(0, I))``; returns (loss, (nll, kl))."""
+    nll = optax.sigmoid_binary_cross_entropy(logits, cells.astype(jnp.float32)).sum(-1)
+    kl = 0.5 * (jnp.exp(log_var) + mean**2 - 1.0 - log_var).sum(-1)
+    return jnp.mean(nll + beta * kl), (jnp.mean(nll), jnp.mean(kl))
+
+
+@dataclass
+class TrainedVAE:
+    """A trained VAE: its module, parameters, config and provenance.
+
+    Attributes:
+        model: the ``VAE`` module.
+        params: its parameters.
+        config: the training settings.
+        env: the environment of the worlds it was trained on.
+        cell_shape: shape of one world's cells.
+        fingerprint: the training dataset's fingerprint.
+        history: per-epoch {"epoch", "train_loss", "holdout_loss", "nll", "kl"}.
+        holdout_indices: dataset indices of the held-out worlds.
+    """
+
+    model: VAE
+    params: Any
+    config: VAEConfig
+    env: str
+    cell_shape: tuple[int, ...]
+    fingerprint: str
+    history: list[dict]
+    holdout_indices: np.ndarray
+
+    def encode(self, cells) -> tuple[jax.Array, jax.Array]:
+        return self.model.apply({"params": self.params}, jnp.asarray(cells), method=VAE.encode)
+
+    def decode(self, z) -> jax.Array:
+        return self.model.apply({"params": self.params}, jnp.asarray(z), method=VAE.decode)
+
+    def save(self, directory: Path | str) -> Path:
+        """Write ``vae.msgpack`` and ``vae.json`` (config, env, fingerprint, history) atomically."""
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        meta = {
+            "checkpoint_version": CHECKPOINT_VERSION,
+            "env": self.env,
+            "cell_shape": list(self.cell_shape),
+            "fingerprint": self.fingerprint,
+            "config": asdict(self.config),
+            "history": self.history,
+            "holdout_indices": np.asarray(self.holdout_indices).tolist(),
+        }
+        _write_atomic(directory / "vae.msgpack", serialization.to_bytes(self.params))
+        _write_atomic(directory / "vae.json", json.dumps(meta, indent=1).encode())
+        return directory
+
+    @classmethod
+    def load(cls, directory: Path | str) -> "TrainedVAE":
+        """Read a checkpoint written by ``save``; refuses other versions and architectures."""
+        directory = Path(directory)
+        remedy = f"train one with `worldagent generator train racing|harvest --out {directory}`"
+        try:
+            meta = json.loads((directory / "vae.json").read_text())
+            blob = (directory / "vae.msgpack").read_bytes()
+        except (OSError, ValueError) as error:
+            raise WorldagentError(f"no readable VAE checkpoint in {directory} ({type(error).__name__}); {remedy}.") from None
+        if meta.get("checkpoint_version") != CHECKPOINT_VERSION:
+            raise WorldagentError(f"VAE checkpoint in {directory} has version {meta.get('checkpoint_version')}, expected {CHECKPOINT_VERSION}; {remedy}.")
+        config = VAEConfig(**{**meta["config"], "encoder": tuple(meta["config"]["encoder"]), "decoder": tuple(meta["config"]["decoder"])})
+        cell_shape = tuple(meta["cell_shape"])
+        model = make_vae(int(np.prod(cell_shape)), config)
+        template = model.init(jax.random.key(0), jnp.zeros((1, int(np.prod(cell_shape)))), jax.random.key(0))["params"]
+        try:
+            params = serialization.from_bytes(template, blob)
+            shapes_match = jax.tree_util.tree_all(jax.tree_util.tree_map(lambda a, b: np.shape(a) == np.shape(b), template, params))
+        except (ValueError, KeyError, TypeError) as error:
+            raise WorldagentError(f"VAE weights in {directory} do not fit the architecture in vae.json ({type(error).__name__}); {remedy}.") from None
+        if not shapes_match:
+            raise WorldagentError(f"VAE weights in {directory} do not fit the architecture in vae.json; {remedy}.")
+        return cls(model, params, config, meta["env"], cell_shape, meta["fingerprint"], meta["history"], np.asarray(meta["holdout_indices"], np.int64))
+
+
+def _write_atomic(path: Path, blob: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(blob)
+    tmp.replace(path)
+
+
+def split_holdout(count: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(train indices, held-out indices): a seeded permutation of ``range(count)``."""
+    order = np.random.default_rng(seed).permutation(count)
+    held = int(round(count * holdout))
+    return np.sort(order[held:]), np.sort(order[:held])
+
+
+def make_epoch(model: VAE, optimizer: optax.GradientTransformation, batch_size: int):
+    """A jitted ``epoch(params, opt_state, cells, key, beta) -> (params, opt_state, mean metrics)``."""
+
+    def loss_fn(params, batch, key, beta):
+        logits, mean, log_var = model.apply({"params": params}, batch, key)
+        return negative_elbo(logits, batch, mean, log_var, beta)
+
+    @jax.jit
+    def epoch(params, opt_state, cells, key, beta):
+        def minibatch(carry, batch_and_key):
+            params, opt_state = carry
+            batch, key = batch_and_key
+            (loss, (nll, kl)), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, key, beta)
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+            return (optax.apply_updates(params, updates), opt_state), jnp.stack([loss, nll, kl])
+
+        key_order, key_noise = jax.random.split(key)
+        steps = cells.shape[0] // batch_size
+        order = jax.random.permutation(key_order, cells.shape[0])[: steps * batch_size]
+        batches = cells[order].reshape(steps, batch_size, -1)
+        (params, opt_state), metrics = jax.lax.scan(minibatch, (params, opt_state), (batches, jax.random.split(key_noise, steps)))
+        return params, opt_state, metrics.mean(axis=0)
+
+    return epoch
+
+
+def make_evaluate(model: VAE, beta: float):
+    """A jitted ``evaluate(params, cells, key) -> negative ELBO`` (one sample of z per world)."""
+
+    @jax.jit
+    def evaluate(params, cells, key):
+        logits, mean, log_var = model.apply({"params": params}, cells, key)
+        return negative_elbo(logits, cells, mean, log_var, beta)[0]
+
+    return evaluate
+
+
+def train_vae(dataset, config: VAEConfig = VAEConfig(), progress: bool = True, checkpoint_dir: Path | str | None = None) -> TrainedVAE:
+    """Train a VAE on ``dataset`` (a ``WorldDataset``), resuming from ``checkpoint_dir`` if it holds one.
+
+    A checkpoint is written after every epoch when ``checkpoint_dir`` is given; a resumed run
+    continues to ``config.epochs`` and refuses a checkpoint trained on other data or with other
+    settings (``epochs`` aside).
+    """
+    config.validate()
+    cells_all = np.asarray(dataset.cells, np.float32)
+    train_idx, held_idx = split_holdout(len(cells_all), config.holdout, config.seed)
+    if len(train_idx) < config.batch_size:
+        raise WorldagentError(f"only {len(train_idx)} training worlds for batch_size={config.batch_size}; use more worlds or a smaller batch.")
+    model = make_vae(cells_all.shape[1], config)
+    optimizer = optax.adam(config.learning_rate)
+    key_init, key = jax.random.split(jax.random.key(config.seed))
+    params = model.init(key_init, jnp.zeros((1, cells_all.shape[1])), key_init)["params"]
+    opt_state = optimizer.init(params)
+    history: list[dict] = []
+
+    resumed = _resume(checkpoint_dir, dataset, config, optimizer)
+    if resumed is not None:
+        params, opt_state, history = resumed
+
+    epoch_fn = make_epoch(model, optimizer, config.batch_size)
+    evaluate = make_evaluate(model, config.beta)
+    train_cells, held_cells = jnp.asarray(cells_all[train_idx]), jnp.asarray(cells_all[held_idx])
+    with progress_bar(f"training the {dataset.env} VAE", total=config.epochs, enabled=progress) as advance:
+        advance(len(history))
+        for epoch in range(len(history), config.epochs):
+            key_epoch, key_eval = jax.random.split(jax.random.fold_in(key, epoch))
+            beta = config.beta * min(1.0, (epoch + 1) / (config.warmup_epochs + 1))
+            params, opt_state, (loss, nll, kl) = epoch_fn(params, opt_state, train_cells, key_epoch, beta)
+            held = float(evaluate(params, held_cells, key_eval)) if len(held_idx) else float("nan")
+            history.append({"epoch": epoch + 1, "train_loss": float(loss), "holdout_loss": held, "nll": float(nll), "kl": float(kl)})
+            if checkpoint_dir is not None:
+                _checkpoint(checkpoint_dir, params, opt_state, history, dataset, config, held_idx)
+            advance(1, loss=float(loss), holdout=held)
+    return TrainedVAE(model, params, config, dataset.env, tuple(dataset.cell_shape), dataset.fingerprint, history, held_idx)
+
+
+def _checkpoint(directory, params, opt_state, history, dataset, config, held_idx) -> None:
+    trained = TrainedVAE(None, params, config, dataset.env, tuple(dataset.cell_shape), dataset.fingerprint, history, held_idx)
+    trained.save(directory)
+    _write_atomic(Path(directory) / "optimizer.msgpack", serialization.to_bytes(opt_state))
+
+
+def _resume(directory, dataset, config: VAEConfig, optimizer):
+    """(params, opt_state, history) from an earlier run of the same training, else None."""
+    if directory is None or not (Path(directory) / "vae.json").exists():
+        return None
+    previous = TrainedVAE.load(directory)
+    same_settings = replace(previous.config, epochs=config.epochs) == config  # more epochs may be asked for
+    if previous.fingerprint != dataset.fingerprint or not same_settings:
+        raise WorldagentError(
+            f"{directory} holds a VAE trained on other data or settings; pass a new --out directory or the same dataset and options."
+        )
+    opt_state = serialization.from_bytes(optimizer.init(previous.params), (Path(directory) / "optimizer.msgpack").read_bytes())
+    return previous.params, opt_state, previous.history

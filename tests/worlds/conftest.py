@@ -1,0 +1,49 @@
+"""Small datasets and small trained VAEs, built once per test session."""
+
+from __future__ import annotations
+
+import pytest
+
+from worldagent.worlds.dataset import make_dataset
+from worldagent.worlds.generator import build_generator
+from worldagent.worlds.vae import VAEConfig, train_vae
+
+# Small but long enough for the latent to be used: on 512 harvest maps a VAE needs a few hundred
+# updates before it beats the mean image (fewer, and the posterior has not left the prior yet).
+SMALL_VAE = VAEConfig(encoder=(128, 64), decoder=(64, 128), epochs=30, batch_size=16, learning_rate=2e-3, warmup_epochs=2)
+
+
+@pytest.fixture(scope="session")
+def small_vae():
+    """Settings of the small VAEs the tests train."""
+    return SMALL_VAE
+
+
+@pytest.fixture(scope="session")
+def racing_data():
+    return make_dataset("racing", 256, 0, progress=False)
+
+
+@pytest.fixture(scope="session")
+def harvest_data():
+    return make_dataset("harvest", 512, 0, progress=False)
+
+
+@pytest.fixture(scope="session")
+def racing_vae(racing_data):
+    return train_vae(racing_data, SMALL_VAE, progress=False)
+
+
+@pytest.fixture(scope="session")
+def harvest_vae(harvest_data):
+    return train_vae(harvest_data, SMALL_VAE, progress=False)
+
+
+@pytest.fixture(scope="session")
+def racing_generator(racing_vae, racing_data):
+    return build_generator(racing_vae, racing_data)
+
+
+@pytest.fixture(scope="session")
+def harvest_generator(harvest_vae, harvest_data):
+    return build_generator(harvest_vae, harvest_data)

@@ -1,0 +1,73 @@
+"""Repair makes every decoded world valid (paper §4.2, §5.2.1)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from worldagent.envs.harvest.world import HarvestMap, spawn_corners
+from worldagent.worlds.repair import nearest_track, repair_harvest
+
+SIZE = 25
+repair = jax.jit(repair_harvest, static_argnums=1)
+
+
+def test_a_tracks_own_raster_maps_to_itself(racing_data):
+    rasters = jnp.asarray(racing_data.cells, jnp.float32)
+    confident = 10.0 * (2.0 * rasters - 1.0)  # the raster itself, as sharp logits
+    np.testing.assert_array_equal(nearest_track(confident, rasters), np.arange(len(rasters)))
+
+
+def test_any_logits_map_to_a_dataset_track_the_most_probable_one(racing_data):
+    rasters = jnp.asarray(racing_data.cells, jnp.float32)
+    logits = jax.random.normal(jax.random.key(0), (16, rasters.shape[1])) * 3.0
+    index = np.asarray(nearest_track(logits, rasters))
+    assert ((0 <= index) & (index < len(rasters))).all()
+    log_likelihood = np.asarray(rasters) @ np.asarray(logits).T - np.logaddexp(0.0, np.asarray(logits)).sum(1)  # [N, B]
+    np.testing.assert_array_equal(index, log_likelihood.argmax(axis=0))
+
+
+def assert_valid_with_k_apples(walls, apples, k):
+    walls, apples = np.asarray(walls), np.asarray(apples)
+    HarvestMap(walls=walls, apples=apples).validate()  # free corners, no apple in a wall
+    assert apples.sum() == k
+    rows, cols = spawn_corners(SIZE, SIZE).T
+    assert not walls[rows, cols].any() and not apples[rows, cols].any()
+
+
+@pytest.mark.parametrize("fill", [0.0, 1.0, -1.0, 1e9, -1e9])
+@pytest.mark.parametrize("k", [1, 30, 200])
+def test_constant_logits_give_valid_maps(fill, k):
+    logits = jnp.full((2, SIZE, SIZE), fill)
+    repaired = repair(logits, k)
+    assert_valid_with_k_apples(repaired.walls, repaired.apples, k)
+
+
+def test_all_walls_are_cleared_only_where_apples_must_go():
+    logits = jnp.stack([jnp.full((SIZE, SIZE), 5.0), jnp.zeros((SIZE, SIZE))])
+    logits = logits.at[0, 3, 4].set(0.5)  # the least confident wall goes first
+    repaired = repair(logits, 1)
+    assert bool(repaired.apples[3, 4]) and int(repaired.walls.sum()) == SIZE * SIZE - 4 - 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), scale=st.floats(0.01, 100.0), k=st.sampled_from([1, 28, 300]))  # K is static
+def test_random_logits_give_valid_maps_with_exactly_k_apples(seed, scale, k):
+    logits = scale * jax.random.normal(jax.random.key(seed), (2, SIZE, SIZE))
+    repaired = repair(logits, k)
+    assert_valid_with_k_apples(repaired.walls, repaired.apples, k)
+    walls = np.array(logits[0] > 0)
+    walls[tuple(spawn_corners(SIZE, SIZE).T)] = False
+    np.testing.assert_array_equal(repaired.walls, walls & ~np.asarray(repaired.apples))  # walls kept unless cleared for apples
+
+
+def test_repair_batches(harvest_generator):
+    logits = jax.random.normal(jax.random.key(1), (6, 2, SIZE, SIZE))
+    batched = repair(logits, 20)
+    for i in range(6):
+        single = repair(logits[i], 20)
+        np.testing.assert_array_equal(batched.apples[i], single.apples)

@@ -53,8 +53,11 @@ class Environment:
         raise NotImplementedError
 
 
-def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Array, params: Any):
+def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Array, params: Any, next_world: Any = None):
     """``env.step``, then, where the episode ended, a fresh episode on the same world.
+
+    Training on a distribution of worlds passes ``next_world``, a world drawn by the caller
+    (e.g. ``distribution.sample(key)``): an episode that ends restarts on it instead.
 
     The returned ``obs`` and ``state`` are those of the new episode where it ended; ``reward``,
     ``terminated``, ``truncated`` and ``info`` are those of the step that ended it (gymnax's
@@ -64,13 +67,16 @@ def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Arr
     """
     key_step, key_reset = jax.random.split(key)
     obs, next_state, reward, terminated, truncated, info = env.step(key_step, state, action, params)
-    reset_obs, reset_state = env.reset(key_reset, state.world, params)
+    reset_obs, reset_state = env.reset(key_reset, state.world if next_world is None else next_world, params)
     done = jnp.logical_or(terminated, truncated)
     if done.ndim:  # multi-agent envs end an episode for everybody at once
         done = done.any()
     pick = lambda fresh, old: jax.lax.select(done, fresh, old)  # noqa: E731
     new_state = jax.tree_util.tree_map(pick, reset_state.replace(world=None), next_state.replace(world=None))
-    new_state = new_state.replace(world=state.world)
+    if next_world is None:
+        new_state = new_state.replace(world=state.world)
+    else:
+        new_state = new_state.replace(world=jax.tree_util.tree_map(pick, reset_state.world, state.world))
     observe = getattr(env, "observe", None)
     new_obs = observe(new_state, params) if observe is not None else pick(reset_obs, obs)
     return new_obs, new_state, reward, terminated, truncated, info

@@ -207,3 +207,16 @@ def test_pack_road_round_trips(track):
     mask = unpack_road(track.road)
     assert mask.shape == (ROAD_SIZE, ROAD_SIZE) and mask.any()
     np.testing.assert_array_equal(pack_road(mask), track.road)
+
+
+def test_autoreset_onto_a_new_world_when_one_is_given(oval, track):
+    _, state = ENV.reset(KEY, oval, PARAMS)
+    crash = arrive_at(ENV, state, (0.6 + HALF_WIDTH + 1e-2, 0.0))
+    auto = jax.jit(lambda k, s, a, w: step_autoreset(ENV, k, s, a, PARAMS, next_world=w))
+    _, after, _, terminated, _, _ = auto(KEY, crash, EAST, track)
+    assert bool(terminated)
+    np.testing.assert_array_equal(after.world.centreline, track.centreline)
+    np.testing.assert_allclose(after.position, track.centreline[0])
+    _, going_on, _, terminated, _, _ = auto(KEY, state, 2, track)  # no episode end: same world
+    assert not bool(terminated)
+    np.testing.assert_array_equal(going_on.world.centreline, oval.centreline)

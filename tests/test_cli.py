@@ -42,3 +42,29 @@ def test_drive_refuses_unknown_policies_and_formats(tmp_path):
     for args, message in ((["--policy", "psychic"], "unknown policy"), (["--out", str(tmp_path / "e.mp4")], ".gif or .png")):
         result = runner.invoke(app, ["drive", *args])
         assert result.exit_code == 2 and message in result.output
+
+
+def test_dataset_and_generator_commands_end_to_end(tmp_path):
+    data = tmp_path / "harvest.npz"
+    assert runner.invoke(app, ["dataset", "harvest", "--n", "40", "--out", str(data), "--quiet"]).exit_code == 0
+    gen = tmp_path / "gen"
+    args = ["generator", "train", "harvest", "--dataset", str(data), "--out", str(gen), "--epochs", "2", "--batch-size", "8", "--quiet"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert runner.invoke(app, ["generator", "show", str(gen), "--count", "2"]).exit_code == 0
+    assert (gen / "traversals.png").exists() and (gen / "reconstructions.png").exists()
+    report = runner.invoke(app, ["generator", "report", str(gen), "--samples", "50"])
+    assert report.exit_code == 0 and '"validity_after_repair": 1.0' in report.output
+    again = runner.invoke(app, args)  # finished run: resumes at its last epoch, trains nothing more
+    assert again.exit_code == 0, again.output
+
+
+def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):
+    cases = [
+        (["dataset", "chess", "--out", str(tmp_path / "x.npz")], "unknown environment"),
+        (["generator", "report", str(tmp_path / "none")], "holds no generator"),
+        (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--dataset", str(tmp_path / "missing.npz")], "does not exist"),
+    ]
+    for args, message in cases:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2 and message in result.output, result.output

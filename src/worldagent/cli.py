@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from worldagent.errors import WorldagentError
 
@@ -45,7 +46,7 @@ def friendly_errors(command):
         try:
             return command(*args, **kwargs)
         except WorldagentError as error:
-            console.print(f"[red]error:[/red] {error}")
+            console.print(f"[red]error:[/red] {escape(str(error))}", soft_wrap=True)  # one line, no markup
             raise typer.Exit(code=2) from None
 
     return wrapper

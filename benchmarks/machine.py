@@ -42,9 +42,6 @@ def record(name: str, result: dict) -> Path:
     """Write ``result`` with the machine and a timestamp to ``results/<name>-<backend>.json``."""
     machine = describe_machine()
     payload = {"benchmark": name, "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": machine, **result}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    path = RESULTS / f"{name}-{machine['backend']}.json"
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(payload, indent=2) + "\n")
-    tmp.replace(path)
-    return path
+    from worldagent.files import write_text
+
+    return write_text(RESULTS / f"{name}-{machine['backend']}.json", json.dumps(payload, indent=2) + "\n")

@@ -83,7 +83,8 @@ def drive(
     from worldagent.envs.core import rollout
     from worldagent.envs.racing.driver import driver_policy
     from worldagent.envs.racing.env import ParticleRacing, episode_metrics
-    from worldagent.envs.racing.render import save_episode_gif, save_png, track_image
+    from worldagent.envs.racing.render import save_episode_gif, track_image
+    from worldagent.files import save_png
     from worldagent.envs.racing.tracks import generate_track
 
     policies = {"driver": None, "random": lambda k, obs, state: jax.random.randint(k, (), 0, 4)}
@@ -216,6 +217,7 @@ def generator_report(
 
     import jax
 
+    from worldagent.files import write_text
     from worldagent.worlds.generator import load_generator
     from worldagent.worlds.quality import harvest_figures, racing_figures, reconstruction
     from worldagent.worlds.vae import split_holdout
@@ -228,8 +230,5 @@ def generator_report(
     key = jax.random.key(seed)
     figures[data.env] = racing_figures(generator, data, samples, key) if data.env == "racing" else harvest_figures(generator, samples, key)
     figures["training"] = {"epochs": len(vae.history), "final": vae.history[-1]}
-    path = directory / "quality.json"
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(figures, indent=1))
-    tmp.replace(path)
+    write_text(directory / "quality.json", json.dumps(figures, indent=1))
     typer.echo(json.dumps(figures, indent=1))

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from worldagent.errors import WorldagentError
+from worldagent.files import write_atomically
 from worldagent.worlds.kinds import ENV_NAMES, world_kind
 
 FORMAT_VERSION = 1
@@ -69,8 +70,6 @@ class WorldDataset:
 
     def save(self, path: Path | str) -> Path:
         """Write the dataset to ``path`` (``.npz``) atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {
             "format_version": np.int64(FORMAT_VERSION),
             "env": np.str_(self.env),
@@ -79,11 +78,11 @@ class WorldDataset:
             "cell_shape": np.asarray(self.cell_shape, np.int64),
         }
         arrays.update({f"world/{name}": np.asarray(value) for name, value in _fields(self.worlds).items()})
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as handle:
-            np.savez_compressed(handle, **arrays)
-        tmp.replace(path)
-        return path
+        def save(tmp: Path) -> None:
+            with open(tmp, "wb") as handle:  # a handle: np.savez would append ".npz" to a path
+                np.savez_compressed(handle, **arrays)
+
+        return write_atomically(path, save)
 
     @classmethod
     def load(cls, path: Path | str, env: str | None = None) -> "WorldDataset":

@@ -23,6 +23,7 @@ from flax import struct
 
 from worldagent.envs.core import check_finite
 from worldagent.errors import WorldagentError
+from worldagent.files import write_text
 from worldagent.worlds.dataset import WorldDataset
 from worldagent.worlds.repair import nearest_track, repair_harvest
 from worldagent.worlds.vae import VAE, TrainedVAE
@@ -120,9 +121,7 @@ def save_generator(directory: Path | str, vae: TrainedVAE, dataset_path: Path | 
     directory = Path(directory)
     vae.save(directory)
     meta = {"env": generator.env, "dataset": str(Path(dataset_path).resolve()), "fingerprint": vae.fingerprint, "apples": generator.apples}
-    tmp = directory / (GENERATOR_FILE + ".tmp")
-    tmp.write_text(json.dumps(meta, indent=1))
-    tmp.replace(directory / GENERATOR_FILE)
+    write_text(directory / GENERATOR_FILE, json.dumps(meta, indent=1))
     return directory
 
 

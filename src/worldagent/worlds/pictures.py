@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from worldagent.envs.racing.render import save_png
+from worldagent.files import save_png
 from worldagent.worlds.dataset import WorldDataset
 from worldagent.worlds.generator import Generator
 

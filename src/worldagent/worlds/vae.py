@@ -23,6 +23,7 @@ import optax
 from flax import serialization
 
 from worldagent.errors import WorldagentError
+from worldagent.files import write_bytes, write_text
 from worldagent.progress import progress_bar
 
 CHECKPOINT_VERSION = 1
@@ -159,8 +160,8 @@ class TrainedVAE:
             "history": self.history,
             "holdout_indices": np.asarray(self.holdout_indices).tolist(),
         }
-        _write_atomic(directory / "vae.msgpack", serialization.to_bytes(self.params))
-        _write_atomic(directory / "vae.json", json.dumps(meta, indent=1).encode())
+        write_bytes(directory / "vae.msgpack", serialization.to_bytes(self.params))
+        write_text(directory / "vae.json", json.dumps(meta, indent=1))
         return directory
 
     @classmethod
@@ -187,12 +188,6 @@ class TrainedVAE:
         if not shapes_match:
             raise WorldagentError(f"VAE weights in {directory} do not fit the architecture in vae.json; {remedy}.")
         return cls(model, params, config, meta["env"], cell_shape, meta["fingerprint"], meta["history"], np.asarray(meta["holdout_indices"], np.int64))
-
-
-def _write_atomic(path: Path, blob: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(blob)
-    tmp.replace(path)
 
 
 def split_holdout(count: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +277,7 @@ def train_vae(dataset, config: VAEConfig = VAEConfig(), progress: bool = True, c
 def _checkpoint(directory, params, opt_state, history, dataset, config, held_idx) -> None:
     trained = TrainedVAE(None, params, config, dataset.env, tuple(dataset.cell_shape), dataset.fingerprint, history, held_idx)
     trained.save(directory)
-    _write_atomic(Path(directory) / "optimizer.msgpack", serialization.to_bytes(opt_state))
+    write_bytes(Path(directory) / "optimizer.msgpack", serialization.to_bytes(opt_state))
 
 
 def _resume(directory, dataset, config: VAEConfig, optimizer):

@@ -8,7 +8,6 @@ atomically (temp file + rename).
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import jax
@@ -16,6 +15,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from worldagent.envs.harvest.env import HEADING_STEP, Harvest, HarvestState
+from worldagent.files import save_png, write_atomically
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
 
 BACKGROUND = (0, 0, 0)
@@ -95,20 +95,6 @@ def draw_map(world: HarvestMap, cell: int = 16, agents: bool = True) -> Image.Im
     return image
 
 
-def _write_atomically(path: Path, save) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    save(tmp)
-    tmp.replace(path)
-    return path
-
-
-def save_png(image: Image.Image, path) -> Path:
-    """Write ``image`` as a PNG at ``path`` atomically."""
-    return _write_atomically(path, lambda tmp: image.save(tmp, format="PNG"))
-
-
 def draw_map_sheet(maps: HarvestMap, path, cell: int = 8, gap: int = 4) -> Path:
     """A PNG sheet of a batch of maps (bool[B, H, W] each), laid out in a near-square grid.
 
@@ -140,4 +126,4 @@ def save_episode_gif(states: HarvestState, path, env: Harvest = Harvest(), obser
         frame = frame.replace(world=world if np.ndim(world.walls) == 2 else jax.tree_util.tree_map(lambda w: w[t], world))
         frames.append(draw_state(frame, env, observer, cell).convert("P", palette=Image.Palette.ADAPTIVE, colors=16))
     save = lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)  # noqa: E731
-    return _write_atomically(path, save)
+    return write_atomically(path, save)

@@ -14,6 +14,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from worldagent.envs.racing.world import HALF_WIDTH, Track, to_pixel
 from worldagent.errors import WorldagentError
+from worldagent.files import save_png, write_atomically
 
 GRASS = (102, 204, 102)
 ROAD = (110, 110, 110)
@@ -76,16 +77,6 @@ def track_image(
     return image.resize((size, size), Image.LANCZOS)
 
 
-def save_png(image: Image.Image, out: Path | str) -> Path:
-    """Write ``image`` to ``out`` atomically (temp file + rename), creating parent folders."""
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    image.save(tmp, format="PNG")
-    tmp.replace(out)
-    return out
-
-
 def draw_track_sheet(tracks: Track, out: Path | str, seeds=None, columns: int = 4, size: int = 192) -> Path:
     """Draw a batch of tracks (leading axis) as a labelled grid and write it to ``out`` (PNG)."""
     centrelines = np.asarray(tracks.centreline)
@@ -119,9 +110,5 @@ def save_episode_gif(
     frames = [
         track_image(track, size, positions[: t + 1], positions[t], crashed and t == len(positions) - 1) for t in frames_at
     ]
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
-    tmp.replace(out)
-    return out
+    save = lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)  # noqa: E731
+    return write_atomically(out, save)

@@ -1,0 +1,145 @@
+"""Campaigns: objective × optimiser × budget × store (DESIGN.md "Campaign", paper §4.4).
+
+A campaign asks its optimiser for a generation of latents, evaluates them through an
+``evaluate`` callable, commits each evaluation to the run store as soon as it finishes, and
+tells the optimiser the scores. Resuming replays: a fresh optimiser with the same seed is asked
+again, generation by generation; every latent it asks must equal the stored one (else the
+store was written by other code or settings, and the campaign stops rather than mix the two);
+stored scores are told back and only the missing evaluations are run. Evaluation randomness
+comes from (seed, generation, slot), not from a running stream, so a resumed campaign ends with
+exactly the evaluations of an uninterrupted one.
+
+``evaluate(z[n, dim], seeds int[n]) -> list of Outcome``: one outcome per latent. A score that
+is NaN (a broken policy, a metric that failed) is stored and reported, and the campaign stops
+with an error instead of optimising on it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from worldagent.errors import WorldagentError
+from worldagent.progress import progress_bar
+from worldagent.search.optimisers import OptimiserConfig, make_optimiser
+from worldagent.store import Evaluation, RunStore
+
+REPLAY_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """The result of evaluating one latent.
+
+    Attributes:
+        score: the objective: the metric averaged over the world's episodes (paper: 8).
+        episodes: one dict of metrics per episode.
+        world: the generated world (stored with the evaluation), or None.
+    """
+
+    score: float
+    episodes: list[dict]
+    world: Any = None
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """What a campaign optimises and how.
+
+    Attributes:
+        name: the campaign's name in the store.
+        env: "racing" or "harvest".
+        objective: the metric's name (e.g. "return", "crashed", "group_reward").
+        maximize: the direction.
+        optimiser: "cmaes", "bo" or "random".
+        budget: evaluations (rounded up to whole generations).
+        seed: seed of the optimiser and of every evaluation.
+        dim: latent dimension.
+        config: optimiser settings.
+        chunk: latents evaluated per call of ``evaluate`` (0: a whole generation).
+    """
+
+    name: str
+    env: str
+    objective: str
+    maximize: bool
+    optimiser: str
+    budget: int
+    seed: int
+    dim: int = 10
+    config: OptimiserConfig = OptimiserConfig()
+    chunk: int = 0
+
+    def validate(self) -> None:
+        if self.budget < 1:
+            raise WorldagentError(f"budget={self.budget}; evaluate at least one world.")
+        if self.chunk < 0:
+            raise WorldagentError(f"chunk={self.chunk}; pass 0 (whole generations) or a positive size.")
+
+
+def evaluation_seed(seed: int, generation: int, slot: int) -> int:
+    """The seed of one evaluation, a function of its place in the campaign only."""
+    return int(np.random.SeedSequence([seed, generation, slot]).generate_state(1)[0])
+
+
+def run_campaign(
+    store: RunStore,
+    spec: CampaignSpec,
+    evaluate: Callable[[np.ndarray, np.ndarray], Sequence[Outcome]],
+    resume: bool = False,
+    progress: bool = True,
+) -> list[Evaluation]:
+    """Run (or resume) a campaign to its budget; returns all its evaluations in order."""
+    spec.validate()
+    campaign = store.open_campaign(
+        spec.name, spec.env, spec.objective, spec.maximize, spec.optimiser, spec.budget, spec.seed,
+        {"dim": spec.dim, **asdict(spec.config)}, resume,
+    )
+    stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
+    optimiser = make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, spec.config)
+    done, generation = 0, 0
+    pick = max if spec.maximize else min
+    best = pick([e.score for e in stored.values() if np.isfinite(e.score)], default=float("nan"))
+    with progress_bar(f"{spec.optimiser} {'max' if spec.maximize else 'min'}imising {spec.objective}", total=spec.budget, enabled=progress) as advance:
+        while done < spec.budget:
+            z = optimiser.ask(optimiser.batch_size if spec.optimiser == "cmaes" else min(optimiser.batch_size, spec.budget - done))
+            scores = np.full(len(z), np.nan)
+            missing = []
+            for slot, latent in enumerate(z):
+                previous = stored.get((generation, slot))
+                if previous is None:
+                    missing.append(slot)
+                    continue
+                if previous.latent.shape != latent.shape or not np.allclose(previous.latent, latent, atol=REPLAY_TOLERANCE, rtol=0):
+                    raise WorldagentError(
+                        f"campaign {spec.name!r}: replaying generation {generation} asks another latent than the store holds; "
+                        "it was written by other code or settings: start a new campaign (--name)."
+                    )
+                scores[slot] = previous.score
+            advance(len(z) - len(missing))
+            step = spec.chunk or max(1, len(missing))
+            for start in range(0, len(missing), step):
+                slots = missing[start : start + step]
+                seeds = np.asarray([evaluation_seed(spec.seed, generation, s) for s in slots])
+                started = time.time()
+                outcomes = evaluate(z[slots], seeds)
+                for slot, outcome in zip(slots, outcomes):
+                    store.add(campaign, generation, slot, z[slot], outcome.score, outcome.episodes, started, outcome.world)
+                    scores[slot] = outcome.score
+                    if np.isfinite(outcome.score):
+                        best = outcome.score if np.isnan(best) else pick(best, outcome.score)
+                advance(len(slots), best=best)
+            broken = int(np.sum(~np.isfinite(scores)))
+            if broken:
+                raise WorldagentError(
+                    f"campaign {spec.name!r}: {broken} world(s) of generation {generation} scored NaN or infinite "
+                    f"({spec.objective}); they are in the store ({store.path}) for inspection, and the search stopped "
+                    "rather than optimise on them. Check the policy and the metric."
+                )
+            optimiser.tell(z, scores)
+            done += len(z)
+            generation += 1
+    return store.evaluations(spec.name)

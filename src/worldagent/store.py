@@ -1,0 +1,243 @@
+"""The run store: every world evaluated, with its latent, metrics and provenance (SQLite).
+
+One file (``store.sqlite`` in a run directory) holds any number of campaigns. Each evaluation
+is committed as soon as it finishes, so a killed campaign loses nothing it finished. The file
+is opened in WAL mode: readers (a report, a notebook) never block the writer, and two campaigns
+can write to one store. A file that is not a worldagent store, or of another schema version,
+is refused with a one-line error.
+
+Tables::
+
+    meta(key, value)                       schema_version, created, worldagent version
+    campaigns(id, name, env, objective, maximize, optimiser, budget, seed, config, created)
+    evaluations(id, campaign_id, generation, slot, latent, world, score, episodes, started, finished)
+
+``latent`` is JSON (a list of floats), ``world`` the world's arrays as ``.npz`` bytes (no
+pickle), ``episodes`` JSON: a list, one dict of metrics per episode.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sqlite3
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from worldagent.errors import WorldagentError
+
+SCHEMA_VERSION = 1
+STORE_FILE = "store.sqlite"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS campaigns (
+    id INTEGER PRIMARY KEY, name TEXT UNIQUE NOT NULL, env TEXT NOT NULL, objective TEXT NOT NULL,
+    maximize INTEGER NOT NULL, optimiser TEXT NOT NULL, budget INTEGER NOT NULL, seed INTEGER NOT NULL,
+    config TEXT NOT NULL, created REAL NOT NULL);
+CREATE TABLE IF NOT EXISTS evaluations (
+    id INTEGER PRIMARY KEY, campaign_id INTEGER NOT NULL REFERENCES campaigns(id),
+    generation INTEGER NOT NULL, slot INTEGER NOT NULL, latent TEXT NOT NULL, world BLOB,
+    score REAL, episodes TEXT NOT NULL, started REAL NOT NULL, finished REAL NOT NULL,
+    UNIQUE (campaign_id, generation, slot));
+"""
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A campaign's identity: what it optimises, how, and with which budget and seed."""
+
+    id: int
+    name: str
+    env: str
+    objective: str
+    maximize: bool
+    optimiser: str
+    budget: int
+    seed: int
+    config: dict
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluated world: ``score`` is the objective averaged over ``episodes``."""
+
+    campaign: str
+    generation: int
+    slot: int
+    latent: np.ndarray
+    score: float
+    episodes: list[dict]
+    started: float
+    finished: float
+    world: dict[str, np.ndarray] | None = None
+
+
+def encode_world(world: Any) -> bytes:
+    """A world pytree (a flax dataclass of arrays) as ``.npz`` bytes."""
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **{name: np.asarray(value) for name, value in vars(world).items()})
+    return buffer.getvalue()
+
+
+def decode_world(blob: bytes) -> dict[str, np.ndarray]:
+    """The arrays of a world stored with ``encode_world`` (no pickle)."""
+    with np.load(io.BytesIO(blob), allow_pickle=False) as data:
+        return {name: data[name] for name in data.files}
+
+
+class RunStore:
+    """A SQLite run store (see the module docstring). Use as a context manager or ``close()``."""
+
+    def __init__(self, path: Path | str, create: bool = True):
+        path = Path(path)
+        if path.is_dir():
+            path = path / STORE_FILE
+        if not path.exists() and not create:
+            raise WorldagentError(f"no run store at {path}; run a campaign there first (`worldagent search ... --out {path.parent}`).")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.path = path
+        try:
+            self.db = sqlite3.connect(path, timeout=30.0, isolation_level=None)
+            self.db.execute("PRAGMA busy_timeout=30000")
+            self.db.execute("PRAGMA journal_mode=WAL")
+            if not self._tables():
+                if not create:
+                    raise WorldagentError(f"{path} is an empty file, not a run store; run a campaign there first.")
+                self._create()
+            self._check()
+        except sqlite3.DatabaseError as error:
+            raise WorldagentError(f"{path} is not a worldagent run store ({error}); point at a store.sqlite written by worldagent.") from None
+
+    def _tables(self) -> set[str]:
+        return {row[0] for row in self.db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+
+    def _create(self) -> None:
+        """Create the schema; safe when several processes create the same new store at once."""
+        from worldagent import __version__
+
+        self.db.execute("BEGIN IMMEDIATE")  # one creator at a time; the others find it done
+        try:
+            if not self._tables():
+                for statement in filter(str.strip, _SCHEMA.split(";")):
+                    self.db.execute(statement)
+                self.db.executemany(
+                    "INSERT OR IGNORE INTO meta VALUES (?, ?)",
+                    [("schema_version", str(SCHEMA_VERSION)), ("created", str(time.time())), ("worldagent", __version__)],
+                )
+            self.db.execute("COMMIT")
+        except BaseException:
+            self.db.execute("ROLLBACK")
+            raise
+
+    def _check(self) -> None:
+        tables = self._tables()
+        if not {"meta", "campaigns", "evaluations"} <= tables:
+            raise WorldagentError(f"{self.path} is a SQLite file but not a worldagent run store; use another path.")
+        row = self.db.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
+        if row is None or int(row[0]) != SCHEMA_VERSION:
+            found = row[0] if row else "none"
+            raise WorldagentError(f"{self.path} has store schema version {found}; this worldagent reads version {SCHEMA_VERSION}.")
+
+    def close(self) -> None:
+        self.db.close()
+
+    def __enter__(self) -> "RunStore":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- campaigns ------------------------------------------------------------------------------
+
+    def campaign(self, name: str) -> Campaign | None:
+        """The campaign called ``name``, or None."""
+        row = self.db.execute("SELECT * FROM campaigns WHERE name=?", (name,)).fetchone()
+        if row is None:
+            return None
+        id_, name, env, objective, maximize, optimiser, budget, seed, config, _ = row
+        return Campaign(id_, name, env, objective, bool(maximize), optimiser, budget, seed, json.loads(config))
+
+    def campaigns(self) -> list[Campaign]:
+        return [self.campaign(row[0]) for row in self.db.execute("SELECT name FROM campaigns ORDER BY id")]
+
+    def open_campaign(self, name: str, env: str, objective: str, maximize: bool, optimiser: str, budget: int, seed: int, config: dict, resume: bool) -> Campaign:
+        """Create campaign ``name``, or (``resume``) return it after checking it is the same campaign."""
+        existing = self.campaign(name)
+        wanted = dict(env=env, objective=objective, maximize=bool(maximize), optimiser=optimiser, seed=int(seed), config=config)
+        if existing is None:
+            with self.db:
+                self.db.execute(
+                    "INSERT INTO campaigns (name, env, objective, maximize, optimiser, budget, seed, config, created) VALUES (?,?,?,?,?,?,?,?,?)",
+                    (name, env, objective, int(maximize), optimiser, int(budget), int(seed), json.dumps(config, sort_keys=True), time.time()),
+                )
+            return self.campaign(name)
+        if not resume:
+            raise WorldagentError(f"campaign {name!r} already exists in {self.path}; pass --resume to continue it or choose another --name.")
+        have = dict(env=existing.env, objective=existing.objective, maximize=existing.maximize, optimiser=existing.optimiser, seed=existing.seed, config=existing.config)
+        if have != json.loads(json.dumps(wanted, sort_keys=True)):
+            differing = sorted(k for k in have if have[k] != json.loads(json.dumps(wanted[k], sort_keys=True)))
+            raise WorldagentError(f"campaign {name!r} was started with other settings ({', '.join(differing)}); resume it with the same ones.")
+        if budget != existing.budget:
+            with self.db:
+                self.db.execute("UPDATE campaigns SET budget=? WHERE id=?", (int(budget), existing.id))
+        return self.campaign(name)
+
+    # -- evaluations ----------------------------------------------------------------------------
+
+    def add(self, campaign: Campaign, generation: int, slot: int, latent, score: float, episodes: list[dict], started: float, world: Any = None) -> None:
+        """Commit one finished evaluation (atomic; a re-run of the same slot is refused)."""
+        blob = encode_world(world) if world is not None else None
+        value = float(score) if np.isfinite(score) else None  # SQLite has no NaN: NULL is "not a number"
+        try:
+            with self.db:
+                self.db.execute(
+                    "INSERT INTO evaluations (campaign_id, generation, slot, latent, world, score, episodes, started, finished) VALUES (?,?,?,?,?,?,?,?,?)",
+                    (campaign.id, generation, slot, json.dumps([float(x) for x in np.ravel(latent)]), blob, value, json.dumps(episodes, default=_json_number), started, time.time()),
+                )
+        except sqlite3.IntegrityError:
+            raise WorldagentError(f"campaign {campaign.name!r} already has generation {generation} slot {slot}; evaluations are never overwritten.") from None
+
+    def evaluations(self, campaign: str | None = None, with_worlds: bool = False) -> list[Evaluation]:
+        """Evaluations in order (generation, slot), of one campaign or of all."""
+        return list(self.iter_evaluations(campaign, with_worlds))
+
+    def iter_evaluations(self, campaign: str | None = None, with_worlds: bool = False) -> Iterator[Evaluation]:
+        query = (
+            "SELECT c.name, e.generation, e.slot, e.latent, e.score, e.episodes, e.started, e.finished, "
+            + ("e.world " if with_worlds else "NULL ")
+            + "FROM evaluations e JOIN campaigns c ON c.id = e.campaign_id "
+            + ("WHERE c.name=? " if campaign else "")
+            + "ORDER BY c.id, e.generation, e.slot"
+        )
+        for name, generation, slot, latent, score, episodes, started, finished, world in self.db.execute(query, (campaign,) if campaign else ()):
+            yield Evaluation(
+                name, generation, slot, np.asarray(json.loads(latent)), float("nan") if score is None else score,
+                json.loads(episodes), started, finished, decode_world(world) if world is not None else None,
+            )
+
+    def export_csv(self, out: Path | str, campaign: str | None = None) -> Path:
+        """One row per evaluation: campaign, generation, slot, score, mean of each metric, latent."""
+        from worldagent.files import write_text
+
+        rows = self.evaluations(campaign)
+        metrics = sorted({key for row in rows for episode in row.episodes for key in episode})
+        buffer = io.StringIO()
+        writer = csv.writer(buffer)
+        dim = max((len(row.latent) for row in rows), default=0)
+        writer.writerow(["campaign", "generation", "slot", "score", *[f"mean_{m}" for m in metrics], "episodes", *[f"z{i}" for i in range(dim)]])
+        for row in rows:
+            means = [np.mean([float(e[m]) for e in row.episodes if m in e]) if row.episodes else "" for m in metrics]
+            writer.writerow([row.campaign, row.generation, row.slot, row.score, *means, len(row.episodes), *row.latent.tolist()])
+        return write_text(out, buffer.getvalue())
+
+
+def _json_number(value):
+    """JSON for numpy scalars; NaN and infinities become null (JSON has no NaN)."""
+    number = float(np.asarray(value))
+    return number if np.isfinite(number) else None

@@ -1,0 +1,75 @@
+"""The optimisers minimise and maximise a known function of z, and beat random search."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from worldagent.errors import WorldagentError
+from worldagent.search.optimisers import OptimiserConfig, make_optimiser
+
+CENTRE = np.full(10, 1.5)
+FAST_BO = OptimiserConfig(bo_batch=4, initial_points=8, bo_candidates=2000, bo_starts=2)
+
+
+def sphere(z):
+    return ((z - CENTRE) ** 2).sum(axis=1)
+
+
+def best_after(name, budget, maximize=False, seed=0, objective=sphere):
+    opt = make_optimiser(name, 10, maximize, seed, FAST_BO)
+    seen = []
+    while len(seen) < budget:
+        z = opt.ask(opt.batch_size)
+        scores = objective(z)
+        opt.tell(z, scores)
+        seen.extend(scores)
+    return max(seen) if maximize else min(seen)
+
+
+@pytest.mark.parametrize("name, budget", [("cmaes", 21 * 8), ("bo", 24)])
+def test_minimises_a_sphere_and_beats_random_search(name, budget):
+    found = best_after(name, budget)
+    random = min(best_after("random", budget, seed=s) for s in range(3))  # random's best of three tries
+    assert found < 0.6 * random
+    assert found < 0.5 * np.sum(CENTRE**2)  # well below the prior's centre, z = 0
+
+
+@pytest.mark.parametrize("name", ["cmaes", "bo"])
+def test_the_direction_flag_flips_the_search(name):
+    bump = lambda z: -sphere(z)  # noqa: E731  (maximum at CENTRE)
+    budget = 21 * 6 if name == "cmaes" else 20
+    maximised = best_after(name, budget, maximize=True, objective=bump)
+    minimised = best_after(name, budget, maximize=False, objective=bump)
+    assert maximised > -0.5 * np.sum(CENTRE**2) and minimised < maximised - 20
+
+
+@pytest.mark.parametrize("name", ["cmaes", "bo", "random"])
+def test_same_seed_same_latents(name):
+    a, b = (make_optimiser(name, 10, False, 7, FAST_BO) for _ in range(2))
+    for _ in range(3):
+        za, zb = a.ask(a.batch_size), b.ask(b.batch_size)
+        np.testing.assert_array_equal(za, zb)
+        a.tell(za, sphere(za))
+        b.tell(zb, sphere(zb))
+
+
+def test_nan_scores_are_refused_not_optimised():
+    for name in ("cmaes", "bo", "random"):
+        opt = make_optimiser(name, 10, False, 0, FAST_BO)
+        z = opt.ask(opt.batch_size)
+        scores = sphere(z)
+        scores[2] = np.nan
+        with pytest.raises(WorldagentError, match="NaN or infinite"):
+            opt.tell(z, scores)
+
+
+def test_bad_requests_are_refused():
+    with pytest.raises(WorldagentError, match="unknown optimiser"):
+        make_optimiser("gradient-descent", 10, False, 0)
+    cma = make_optimiser("cmaes", 10, False, 0)
+    with pytest.raises(WorldagentError, match="whole generation"):
+        cma.ask(5)
+    z = cma.ask(21)
+    with pytest.raises(WorldagentError, match="exactly the generation"):
+        cma.tell(z + 1.0, sphere(z))

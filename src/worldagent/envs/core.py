@@ -52,6 +52,10 @@ class Environment:
     def step(self, key: jax.Array, state: Any, action: jax.Array, params: Any):
         raise NotImplementedError
 
+    def metrics(self, state: Any) -> dict[str, jax.Array]:
+        """The per-episode metrics accumulated in ``state`` (scalars, or ``[N]`` per agent)."""
+        raise NotImplementedError
+
 
 def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Array, params: Any, next_world: Any = None):
     """``env.step``, then, where the episode ended, a fresh episode on the same world.

@@ -28,7 +28,7 @@ class DriverParams:
     """
 
     lookahead: int = 4
-    brake_horizon: int = 16
+    brake_horizon: int = struct.field(pytree_node=False, default=16)  # an array length: static
     turn_slowdown: float = 0.1
     min_speed: float = 0.2
     max_speed: float = 0.5

@@ -237,6 +237,10 @@ class ParticleRacing(Environment):
         info = {"crashed": crashed, "lap_completed": lap_completed, "progress": progress}
         return self.observe(state, params), state, reward, terminated, truncated, info
 
+    def metrics(self, state: RacingState) -> dict[str, jax.Array]:
+        """Per-episode metrics of the episode so far (see ``episode_metrics``)."""
+        return episode_metrics(state)
+
     def observe(self, state: RacingState, params: RacingParams) -> jax.Array:
         """f32[W·W + 4]: road window around the agent, position, velocity / top speed."""
         window = road_window(state.world.road, state.position, self.window)

@@ -68,3 +68,50 @@ def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):
     for args, message in cases:
         result = runner.invoke(app, args)
         assert result.exit_code == 2 and message in result.output, result.output
+
+
+def test_search_and_random_evaluation_commands(tmp_path, racing_vae, racing_data, racing_generator):
+    from worldagent.store import RunStore
+    from worldagent.worlds.generator import save_generator
+
+    gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
+    common = ["--agent", "driver", "--generator", str(gen), "--out", str(tmp_path / "run"), "--repeats", "2", "--quiet"]
+    result = runner.invoke(app, ["evaluate", "random", "racing", "--worlds", "12", *common])
+    assert result.exit_code == 0, result.output
+    assert "normalised" in result.output and (tmp_path / "run" / "random-return-s0.png").exists()
+    search = ["search", "racing", "--objective", "crashed", "--maximize", "--budget", "21", *common]
+    result = runner.invoke(app, search)
+    assert result.exit_code == 0, result.output
+    again = runner.invoke(app, search)
+    assert again.exit_code == 2 and "--resume" in again.output
+    assert runner.invoke(app, [*search, "--resume"]).exit_code == 0
+    with RunStore(tmp_path / "run", create=False) as store:
+        assert [c.name for c in store.campaigns()] == ["random-return-s0", "cmaes-max-crashed-s0"]
+        assert len(store.evaluations("cmaes-max-crashed-s0")) == 21
+    bad = runner.invoke(app, ["search", "racing", "--objective", "speed", *common])
+    assert bad.exit_code == 2 and "no metric 'speed'" in bad.output
+
+
+def test_train_commands_write_an_agent_that_search_can_load(tmp_path):
+    run = tmp_path / "ppo"
+    result = runner.invoke(app, ["train", "racing", "--algo", "ppo", "--episodes", "40", "--out", str(run), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert (run / "curve.csv").exists() and (run / "curve.png").exists() and (run / "policy" / "policy.json").exists()
+    result = runner.invoke(app, ["train", "harvest", "--episodes", "8", "--tagger", "0", "--out", str(tmp_path / "dqn"), "--quiet"])
+    assert result.exit_code == 0, result.output
+    from worldagent.cli import _agent
+
+    assert _agent("racing", str(run), greedy=False).params is not None
+    assert _agent("harvest", str(tmp_path / "dqn"), greedy=False).params is not None
+
+
+def test_train_refuses_bad_requests_in_one_line(tmp_path):
+    cases = [
+        (["train", "racing", "--algo", "dqn"], "unknown algorithm 'dqn' for racing"),
+        (["train", "racing", "--episodes", "0"], "at least one episode"),
+        (["train", "harvest", "--worlds", "vae"], "--generator"),
+        (["train", "racing", "--worlds", str(tmp_path / "missing.npz")], "does not exist"),
+    ]
+    for args, message in cases:
+        result = runner.invoke(app, [*args, "--out", str(tmp_path / "x"), "--quiet"])
+        assert result.exit_code == 2 and message in result.output, result.output

@@ -20,7 +20,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)  # never break a message across lines
 
 
 def _print_version(value: bool) -> None:
@@ -232,3 +232,175 @@ def generator_report(
     figures["training"] = {"epochs": len(vae.history), "final": vae.history[-1]}
     write_text(directory / "quality.json", json.dumps(figures, indent=1))
     typer.echo(json.dumps(figures, indent=1))
+
+
+def _env_and_params(env: str, tagger: list[int]):
+    """The env object and its params; harvest agents listed in ``tagger`` may TAG (§6.2.2)."""
+    if env == "racing":
+        from worldagent.envs.racing.env import ParticleRacing
+
+        if tagger:
+            raise WorldagentError("--tagger applies to harvest only.")
+        racing = ParticleRacing()
+        return racing, racing.default_params
+    if env == "harvest":
+        from worldagent.envs.harvest import Harvest, make_params
+
+        if any(not 0 <= i < 4 for i in tagger):
+            raise WorldagentError(f"--tagger {tagger}: agents are numbered 0 to 3.")
+        return Harvest(), make_params(can_tag=[i in tagger for i in range(4)])
+    raise WorldagentError(f"unknown environment {env!r}; use racing or harvest.")
+
+
+def _agent(env: str, spec: str, greedy: bool):
+    """A saved agent (its directory, or the `train` run directory holding it), or a scripted policy by name."""
+    from worldagent.agents.policy import CONFIG_FILE, load_policy, scripted_policy
+
+    path = Path(spec)
+    if path.is_dir():
+        found = next((p for p in (path, path / "policy", path / "agents") if (p / CONFIG_FILE).exists()), path)
+        return load_policy(found, env=env, greedy=greedy).policy
+    return scripted_policy(env, spec)
+
+
+def _campaign(env, agent, generator, objective, maximize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet, config=None):
+    """Run one campaign from CLI options; returns its evaluations and spec."""
+    from worldagent.search.campaign import CampaignSpec, run_campaign
+    from worldagent.search.objectives import LatentObjective, Objective, metric_name
+    from worldagent.search.optimisers import OptimiserConfig
+    from worldagent.store import RunStore
+    from worldagent.worlds.generator import load_generator
+
+    target = Objective(env, metric_name(env, objective), maximize)
+    env_obj, params = _env_and_params(env, tagger)
+    policy = _agent(env, agent, greedy)
+    G, _, _ = load_generator(generator)
+    evaluate = LatentObjective(target, env_obj, policy, G, repeats, params)
+    spec = CampaignSpec(name, env, target.metric, maximize, optimiser, budget, seed, G.latent_dim, config or OptimiserConfig())
+    with RunStore(out) as store:
+        return run_campaign(store, spec, evaluate, resume=resume, progress=not quiet), spec
+
+
+AGENT_HELP = "A `worldagent train` run directory (or the agent directory in it), or a scripted policy: driver (racing), random or greedy (harvest)."
+
+
+@app.command()
+@friendly_errors
+def search(
+    env: str = typer.Argument(..., help=ENV_HELP),
+    agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
+    generator: Path = typer.Option(..., "--generator", help="Generator directory (from `worldagent generator train`)."),
+    objective: str = typer.Option("reward", "--objective", help="Metric: reward, or racing return|normalised_return|crashed|lap_completed|progress|steps, harvest group_reward|conflict|equality|sustainability|peace."),
+    minimize: bool = typer.Option(False, "--minimize/--maximize", help="Direction of the search."),
+    optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes, bo or random."),
+    budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate (rounded up to whole CMA-ES generations)."),
+    repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the optimiser and of every episode."),
+    out: Path = typer.Option(Path("runs/search"), "--out", help="Run directory; its store.sqlite may hold many campaigns."),
+    name: str = typer.Option(None, "--name", help="Campaign name (default: optimiser-direction-objective-seed)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue a killed campaign of the same name."),
+    tagger: list[int] = typer.Option([], "--tagger", help="Harvest: an agent allowed to TAG (repeatable)."),
+    greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+) -> None:
+    """Search the generator's latent space for worlds that minimise or maximise an agent metric (paper §4.4)."""
+    from worldagent.search.objectives import metric_name
+
+    direction = "min" if minimize else "max"
+    name = name or f"{optimiser}-{direction}-{metric_name(env, objective)}-s{seed}"
+    evaluations, spec = _campaign(env, agent, generator, objective, not minimize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet)
+    scores = np.array([e.score for e in evaluations])
+    best = evaluations[int(np.nanargmin(scores) if minimize else np.nanargmax(scores))]
+    console.print(
+        f"{name}: {len(evaluations)} worlds; {spec.objective} mean {np.nanmean(scores):.4g}; {direction} {best.score:.4g} "
+        f"(generation {best.generation}, slot {best.slot}) -> {out / 'store.sqlite'}"
+    )
+
+
+evaluate_app = typer.Typer(help="Evaluate agents on worlds from the generator.", no_args_is_help=True)
+app.add_typer(evaluate_app, name="evaluate")
+
+
+@evaluate_app.command("random")
+@friendly_errors
+def evaluate_random(
+    env: str = typer.Argument(..., help=ENV_HELP),
+    agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
+    generator: Path = typer.Option(..., "--generator", help="Generator directory (from `worldagent generator train`)."),
+    worlds: int = typer.Option(1000, "--worlds", help="Worlds z ~ N(0, I) to evaluate (the paper: 1,000)."),
+    metric: str = typer.Option("reward", "--metric", help="Metric whose distribution to draw (see `search --help`)."),
+    repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the latents and episodes."),
+    out: Path = typer.Option(Path("runs/evaluate"), "--out", help="Run directory (store.sqlite and the histogram)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue a killed evaluation."),
+    tagger: list[int] = typer.Option([], "--tagger", help="Harvest: an agent allowed to TAG (repeatable)."),
+    greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+) -> None:
+    """The distribution of a metric over randomly generated worlds (paper §6.1.1, Figure 6a)."""
+    from worldagent.reports.figures import distribution_figure
+    from worldagent.search.objectives import metric_name
+    from worldagent.search.optimisers import OptimiserConfig
+
+    config = OptimiserConfig(random_batch=min(max(worlds, 1), 250))
+    name = f"random-{metric_name(env, metric)}-s{seed}"
+    evaluations, spec = _campaign(env, agent, generator, metric, True, "random", worlds, repeats, seed, out, name, resume, tagger, greedy, quiet, config)
+    scores = np.array([e.score for e in evaluations])
+    figure = distribution_figure({"random worlds": scores}, spec.objective, out / f"{name}.png", f"{env}: {spec.objective} over {len(scores)} random worlds")
+    line = f"{name}: {len(scores)} worlds x {repeats} episodes; {spec.objective} mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})"
+    if env == "racing" and spec.objective == "return":
+        normalised = np.array([np.mean([e["normalised_return"] for e in ev.episodes]) for ev in evaluations])
+        line += f", normalised {normalised.mean():.3f}"
+    console.print(f"{line} -> {figure}")
+
+
+ALGORITHMS = {"racing": ("acktr", "ppo"), "harvest": ("dqn",)}
+
+
+@app.command()
+@friendly_errors
+def train(
+    env: str = typer.Argument(..., help=ENV_HELP),
+    out: Path = typer.Option(..., "--out", help="Run directory: checkpoint, learning curve (CSV, PNG), the saved agent."),
+    algo: str = typer.Option(None, "--algo", help="racing: acktr (the paper's) or ppo; harvest: dqn (independent DQNs)."),
+    episodes: int = typer.Option(None, "--episodes", help="Training episodes (default: the paper's budget, racing 10,000, harvest 5,000)."),
+    worlds: str = typer.Option("generator", "--worlds", help="Training worlds: generator (procedural), vae (G(z), needs --generator), or a dataset .npz."),
+    generator: Path = typer.Option(None, "--generator", help="Generator directory for --worlds vae."),
+    tagger: list[int] = typer.Option([], "--tagger", help="Harvest: the agent allowed to TAG (the paper's influencing experiment: 0)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the run."),
+    resume: bool = typer.Option(True, "--resume/--restart", help="Continue from the run directory's checkpoint, or start over."),
+    quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+) -> None:
+    """Train agents on a distribution of worlds (paper §4.3, §5.3); a killed run resumes."""
+    from worldagent.agents.distributions import world_distribution
+
+    if env not in ALGORITHMS:
+        raise WorldagentError(f"unknown environment {env!r}; use racing or harvest.")
+    algo = algo or ALGORITHMS[env][0]
+    if algo not in ALGORITHMS[env]:
+        raise WorldagentError(f"unknown algorithm {algo!r} for {env}; use one of: {', '.join(ALGORITHMS[env])}.")
+    if episodes is not None and episodes < 1:
+        raise WorldagentError(f"--episodes {episodes}; train for at least one episode.")
+    if worlds == "vae" and generator is None:
+        raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
+    distribution = world_distribution(env, worlds, generator_dir=generator, progress=not quiet)
+    if env == "racing":
+        from worldagent.agents.acktr import ACKTRConfig
+        from worldagent.agents.ppo import PPOConfig
+        from worldagent.agents.training import train_racing
+
+        if tagger:
+            raise WorldagentError("--tagger applies to harvest only.")
+        config_class = {"acktr": ACKTRConfig, "ppo": PPOConfig}[algo]
+        config = config_class() if episodes is None else config_class(total_episodes=episodes)
+        result = train_racing(config, distribution, out, algo, seed=seed, progress=not quiet, resume=resume, distribution_spec=worlds)
+        console.print(f"trained {algo} for {result.episodes:,} episodes ({result.env_steps:,} steps, {result.wall_seconds:.0f} s) -> {out}")
+        return
+    from worldagent.agents.dqn import DQNConfig
+    from worldagent.agents.dqn_run import train_harvest
+
+    if len(tagger) > 1:
+        raise WorldagentError("--tagger: the influencing experiment gives one agent the TAG action; pass one index.")
+    config = DQNConfig(num_episodes=episodes or DQNConfig.num_episodes, tagger=tagger[0] if tagger else None, seed=seed)
+    result = train_harvest(config, distribution, out, progress=not quiet, resume=resume)
+    console.print(f"trained 4 DQNs for {config.num_chunks * config.num_envs:,} episodes ({result.env_steps:,} steps, {result.wall_s:.0f} s) -> {out}")

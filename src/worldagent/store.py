@@ -96,7 +96,7 @@ class RunStore:
 
     def __init__(self, path: Path | str, create: bool = True):
         path = Path(path)
-        if path.is_dir():
+        if path.suffix != ".sqlite":  # a run directory
             path = path / STORE_FILE
         if not path.exists() and not create:
             raise WorldagentError(f"no run store at {path}; run a campaign there first (`worldagent search ... --out {path.parent}`).")

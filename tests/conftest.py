@@ -1,4 +1,4 @@
-"""Small datasets and small trained VAEs, built once per test session."""
+"""Shared session fixtures: small datasets and small trained VAEs / generators, built once."""
 
 from __future__ import annotations
 

@@ -1,0 +1,116 @@
+"""Time the harvest agents' training (paper §5.3) and measure them against random agents.
+
+    python benchmarks/train_harvest.py                         # the paper's 5,000 episodes, agent 0 tags (§6.2.2)
+    python benchmarks/train_harvest.py --tagger none           # nobody tags
+    python benchmarks/train_harvest.py --episodes 800          # a shorter run (the time is extrapolated)
+
+Trains four independent DQNs (``worldagent.agents.dqn``, default ``DQNConfig``) on a uniform
+pool of procedurally generated maps (seeds 0..pool-1), then plays the trained agents
+(epsilon-greedy with ``DQNConfig.act_epsilon``; also greedy and at 0.05 and 0.1) and
+uniformly random agents on the same held-out maps (seeds from 1,000,000), ``--repeats``
+episodes each (the paper evaluates each world 8 times, §5.2.2) with the same keys. Reports the
+wall time of training (compilation included: it is part of what a user waits for), env-steps
+and agent-steps per second, the group-reward ratio trained / random, and equality and conflict
+(the paper's default agents with agent 0 tagging: conflict 0.51, equality 0.33, §6.2.2). When
+``--episodes`` is below the paper's 5,000 the full-budget time is extrapolated from the measured
+rate and labelled so. Results go to ``benchmarks/results/train_harvest-<tagger>-<backend>.json``
+with the machine's description; the run directory (curve, checkpoint, agents) to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import describe_machine, record  # noqa: E402
+
+from worldagent.agents.distributions import WorldPool  # noqa: E402
+from worldagent.agents.dqn import DQNConfig, make_act  # noqa: E402
+from worldagent.agents.dqn_run import evaluate, train_harvest  # noqa: E402
+from worldagent.envs.harvest.maps import generate_maps, seeds_from  # noqa: E402
+from worldagent.envs.harvest.policies import random_act  # noqa: E402
+
+PAPER_EPISODES = 5000
+TARGET_MINUTES = 60
+EVAL_SEED = 1_000_000
+
+
+def summary(metrics: dict) -> dict:
+    """Means over worlds and repeats of the scalar metrics, and per-agent mean returns."""
+    out = {name: round(float(np.mean(value)), 4) for name, value in metrics.items() if name != "returns"}
+    out["returns"] = [round(float(r), 2) for r in np.asarray(metrics["returns"]).mean(axis=(0, 1))]
+    return out
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--episodes", type=int, default=PAPER_EPISODES, help="training episodes per agent (paper: 5000)")
+    parser.add_argument("--tagger", default="0", help="agent allowed to TAG (0-3), or 'none' (paper §6.2.2: 0)")
+    parser.add_argument("--num-envs", type=int, default=DQNConfig.num_envs)
+    parser.add_argument("--pool", type=int, default=10_000, help="training maps (the paper's dataset: 10,000)")
+    parser.add_argument("--eval-worlds", type=int, default=100)
+    parser.add_argument("--repeats", type=int, default=8)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=None, help="run directory (default: a fresh one under /tmp)")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+
+    tagger = None if args.tagger.lower() == "none" else int(args.tagger)
+    config = dataclasses.replace(DQNConfig(), num_episodes=args.episodes, tagger=tagger, num_envs=args.num_envs, seed=args.seed)
+    name = f"tagger{tagger}" if tagger is not None else "notag"
+    out = args.out or Path(f"/tmp/worldagent-train-harvest-{name}-{int(time.time())}")
+    pool = WorldPool.create(generate_maps(seeds_from(0, args.pool)))
+
+    start = time.perf_counter()
+    result = train_harvest(config, pool, out, progress=not args.quiet, resume=False)
+    wall = time.perf_counter() - start
+    env_steps_per_s = result.env_steps / wall
+    full_budget_s = PAPER_EPISODES * config.episode_length / env_steps_per_s
+
+    worlds = generate_maps(seeds_from(EVAL_SEED, args.eval_worlds))
+    key = jax.random.key(args.seed + 1)
+    trained = summary(evaluate(key, make_act(config), result.params, worlds, config, args.repeats))
+    by_epsilon = {str(eps): summary(evaluate(key, make_act(config, eps), result.params, worlds, config, args.repeats)) for eps in (0.0, 0.05, 0.1) if eps != config.act_epsilon}
+    random = summary(evaluate(key, random_act, None, worlds, config, args.repeats))
+    figures = {
+        "command": "python benchmarks/train_harvest.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "config": {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(config).items()},
+        "episodes_trained": config.num_chunks * config.num_envs,
+        "env_steps": result.env_steps,
+        "agent_steps": 4 * result.env_steps,
+        "train_wall_s": round(wall, 1),
+        "env_steps_per_s": round(env_steps_per_s),
+        "agent_steps_per_s": round(4 * env_steps_per_s),
+        "paper_budget_wall_min": round(full_budget_s / 60, 1),
+        "paper_budget_wall_is": "measured" if config.num_chunks * config.num_envs >= PAPER_EPISODES else "extrapolated from the measured rate",
+        "target_min": TARGET_MINUTES,
+        "eval": {"worlds": args.eval_worlds, "repeats": args.repeats, "first_seed": EVAL_SEED, "policy": f"epsilon-greedy, act_epsilon {config.act_epsilon}"},
+        "trained": trained,
+        "random": random,
+        "trained_at_other_epsilon": by_epsilon,
+        "group_reward_ratio": round(trained["group_reward"] / max(random["group_reward"], 1e-9), 2),
+        "paper_default_agents_tagging": {"conflict": 0.51, "equality": 0.33},
+        "final_training_chunk": result.history[-1],
+        "run_dir": str(out),
+    }
+    path = record(f"train_harvest-{name}", figures)
+    machine = describe_machine()
+    print(
+        f"{figures['episodes_trained']} episodes in {wall / 60:.1f} min ({figures['env_steps_per_s']} env-steps/s, "
+        f"{machine['cores']} cores); paper budget: {figures['paper_budget_wall_min']} min ({figures['paper_budget_wall_is']})\n"
+        f"group reward trained {trained['group_reward']:.1f} vs random {random['group_reward']:.1f}: ratio {figures['group_reward_ratio']}\n"
+        f"equality {trained['equality']:.3f}, conflict {trained['conflict']:.3f} (random: {random['equality']:.3f}, {random['conflict']:.3f})\n"
+        f"recorded in {path}"
+    )
+    return figures
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,270 @@
+"""ACKTR (Wu et al. 2017, the paper's [21]) for the racing agent, jitted end to end (PureJaxRL style).
+
+The paper trains its racing agent with "an existing PyTorch implementation of the ACKTR
+algorithm with its default settings, training for 10,000 episodes" (§5.3): ikostrikov's
+pytorch-a2c-ppo-acktr. ACKTR is A2C whose actor and critic are updated together by K-FAC
+(``kfac.py``) with a KL trust-region step size. As there:
+
+- loss = ``-mean(A·log π(a)) + vf_coef · mean(A²) - ent_coef · mean(H(π))`` with advantages
+  ``A = R - V`` from n-step returns ``R`` (no GAE, no advantage normalisation);
+- the Fisher is sampled: actions drawn from the policy itself and a value target ``V + ε``,
+  ``ε ~ N(0, 1)``, as ``log π(ã) - (V - sg(V + ε))²`` (baselines' ``vf_fisher_coef`` = 1);
+- no gradient clipping (ikostrikov clips only for A2C).
+
+Same API shape as ``ppo.py`` (``make_train(config, env, env_params, distribution) -> Trainer``
+with ``init``, ``train_chunk``, ``train``; ``train(key)`` vmappable over seeds; the budget is
+counted in episodes and updates after it is spent are skipped), so the host loop
+``training.train_racing(..., algo="acktr")`` drives it; importing this module registers it there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from worldagent.agents import training
+from worldagent.agents.kfac import KFAC, KFACConfig, KFACState
+from worldagent.agents.networks import ActorCritic
+from worldagent.agents.ppo import CURVE_FIELDS, Trainer, max_updates
+from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
+from worldagent.errors import WorldagentError
+
+
+@dataclass(frozen=True)
+class ACKTRConfig:
+    """ACKTR settings. Sources: ikostrikov = pytorch-a2c-ppo-acktr (the paper's implementation),
+    baselines = OpenAI baselines ``acktr``; "tuned" = changed from those to reach the issue's
+    targets within the paper's budget on 2 CPU cores (see the field).
+
+    Attributes:
+        total_episodes: training stops once this many episodes have ended (paper §5.3: 10,000).
+        num_envs: B, envs stepped in parallel, each on its own world [tuned; ikostrikov 16].
+        num_steps: T, steps per env per update, the n of the n-step returns [tuned; ikostrikov 5].
+        gamma: discount [ikostrikov, baselines 0.99].
+        gae_lambda: 1.0 = plain n-step returns [ikostrikov use_gae=False]; below 1, GAE targets.
+        ent_coef: entropy bonus weight [ikostrikov, baselines 0.01].
+        vf_coef: value loss weight [ikostrikov value_loss_coef 0.5; baselines vf_coef 0.5].
+        reward_scale: rewards are multiplied by this for learning only (racing's returns span
+            −360..100; ikostrikov normalises rewards of non-image envs by a running return std
+            (VecNormalize); a fixed 0.01, as our PPO, puts value targets near unit scale).
+        learning_rate: K-FAC's η_max [ikostrikov, baselines 0.25].
+        anneal_lr: decay η_max linearly to 0 with the fraction of episodes done [baselines'
+            lrschedule="linear"; ikostrikov: off by default].
+        kl_clip: the trust-region radius δ [tuned; ikostrikov, baselines 0.001: with 0.001 the
+            step was clipped on most updates and learning to stay on the road took ~4,000 of the
+            10,000 episodes at B·T = 512].
+        momentum: K-FAC momentum [0.9].
+        stat_decay: running-average decay of the Kronecker factors [ikostrikov 0.99].
+        damping: K-FAC damping λ [ikostrikov 0.01].
+        inverse_every: T_inv, updates between eigendecompositions of the factors [ikostrikov 10].
+        hidden: hidden widths of each actor-critic torso (``networks.py``; ikostrikov 64, 64).
+        activation: "tanh" [ikostrikov] or "relu".
+    """
+
+    total_episodes: int = 10_000
+    num_envs: int = 32
+    num_steps: int = 16
+    gamma: float = 0.99
+    gae_lambda: float = 1.0
+    ent_coef: float = 0.01
+    vf_coef: float = 0.5
+    reward_scale: float = 0.01
+    learning_rate: float = 0.25
+    anneal_lr: bool = False
+    kl_clip: float = 0.01
+    momentum: float = 0.9
+    stat_decay: float = 0.99
+    damping: float = 0.01
+    inverse_every: int = 10
+    hidden: tuple[int, ...] = (128, 128)
+    activation: str = "tanh"
+
+    def __post_init__(self):
+        for name in ("total_episodes", "num_envs", "num_steps", "inverse_every"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise WorldagentError(f"ACKTRConfig.{name}={value!r}; it must be a positive integer.")
+        for name in ("reward_scale", "learning_rate", "kl_clip", "damping"):
+            if not getattr(self, name) > 0:
+                raise WorldagentError(f"ACKTRConfig.{name}={getattr(self, name)!r}; it must be positive.")
+        for name in ("gamma", "gae_lambda"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise WorldagentError(f"ACKTRConfig.{name}={getattr(self, name)!r}; it must be in [0, 1].")
+        for name in ("momentum", "stat_decay"):
+            if not 0.0 <= getattr(self, name) < 1.0:
+                raise WorldagentError(f"ACKTRConfig.{name}={getattr(self, name)!r}; it must be in [0, 1).")
+        if self.ent_coef < 0 or self.vf_coef < 0:
+            raise WorldagentError("ACKTRConfig.ent_coef and vf_coef must be non-negative.")
+        if not self.hidden or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.hidden):
+            raise WorldagentError(f"ACKTRConfig.hidden={self.hidden!r}; give one or more positive layer widths.")
+        if self.activation not in ("tanh", "relu"):
+            raise WorldagentError(f"ACKTRConfig.activation={self.activation!r}; use 'tanh' or 'relu'.")
+        object.__setattr__(self, "hidden", tuple(self.hidden))
+
+    def kfac_config(self) -> KFACConfig:
+        """The K-FAC optimiser's settings (exact damping, as ikostrikov)."""
+        return KFACConfig(
+            learning_rate=self.learning_rate, kl_clip=self.kl_clip, momentum=self.momentum,
+            stat_decay=self.stat_decay, damping=self.damping, inverse_every=self.inverse_every,
+        )  # fmt: skip
+
+    def to_dict(self) -> dict:
+        """JSON-able fields."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, fields: dict) -> "ACKTRConfig":
+        """Inverse of ``to_dict``; unknown fields are refused."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(fields) - known
+        if unknown:
+            raise WorldagentError(f"ACKTR config has unknown fields {sorted(unknown)}; remove them (known: {', '.join(sorted(known))}).")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()})
+
+
+@struct.dataclass
+class ACKTRState:
+    """Everything a run carries between updates (the checkpoint).
+
+    Attributes:
+        params: the actor-critic's variables (``{"params": ...}``).
+        opt_state: K-FAC's state (``kfac.KFACState``).
+        runner: the envs mid-episode (``rollouts.EnvRunner``).
+        key: the run's PRNG key as raw ``u32`` key data (``jax.random.key_data``; typed keys do
+            not serialise to msgpack), kept so that a resumed run continues identically.
+        update: i32 updates done.
+        episodes: i32 episodes ended so far.
+        env_steps: i32 env steps taken so far.
+    """
+
+    params: Any
+    opt_state: KFACState
+    runner: EnvRunner
+    key: jax.Array
+    update: jax.Array
+    episodes: jax.Array
+    env_steps: jax.Array
+
+
+def _key_data(key: jax.Array) -> jax.Array:
+    """u32 key data of a typed or raw PRNG key."""
+    return jax.random.key_data(key) if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) else key
+
+
+def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
+    """ACKTR on ``env`` with each episode's world drawn from ``distribution``.
+
+    Args:
+        config: ``ACKTRConfig``.
+        env: a single-agent env with flat observations (Particle Racing).
+        env_params: its params (``env.default_params``).
+        distribution: a world distribution (``distributions.py``), closed over as a constant.
+
+    Returns:
+        A ``ppo.Trainer``: ``init(key)``, ``train_chunk(state, n)``, ``train(key)`` (vmappable over
+        keys), ``network``, ``max_updates``, ``done(state)``. Curve rows have ``ppo.CURVE_FIELDS``;
+        for ACKTR ``learning_rate`` is the step size η the trust region allowed and ``approx_kl``
+        the KL it predicts, ``½ η² Δᵀ F̂ Δ``.
+    """
+    if not isinstance(config, ACKTRConfig):
+        raise WorldagentError(f"config is a {type(config).__name__}; pass an ACKTRConfig.")
+    if getattr(env, "num_agents", 1) != 1:
+        raise WorldagentError("ACKTR here trains single-agent envs (racing); use the independent DQN for harvest.")
+    network = ActorCritic(env.num_actions, config.hidden, config.activation)
+    kfac_config = config.kfac_config()
+    kfac = KFAC(kfac_config, network.apply)
+    batch = config.num_envs * config.num_steps
+    budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
+    example_obs = jnp.zeros((batch, *env.observation_shape), jnp.float32)
+
+    def init(key: jax.Array) -> ACKTRState:
+        key_net, key_env, key_run = jax.random.split(key, 3)
+        params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
+        runner = init_runner(key_env, env, env_params, distribution, config.num_envs)
+        zero = jnp.int32(0)
+        return ACKTRState(params, kfac.init(params, example_obs), runner, _key_data(key_run), zero, zero, zero)
+
+    def update(state: ACKTRState) -> tuple[ACKTRState, dict]:
+        key, key_roll, key_fisher = jax.random.split(jax.random.wrap_key_data(state.key), 3)
+        runner, traj, last = collect(key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps)
+        last_value = last[0] if isinstance(last, tuple) else last  # (value, potential) in newer rollouts
+        rewards = traj.reward * config.reward_scale
+        if config.gae_lambda < 1.0:
+            _, returns = gae(rewards, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
+        else:
+            returns = nstep_returns(rewards, traj.done, last_value, config.gamma)
+        obs = traj.obs.reshape(batch, *traj.obs.shape[2:])
+        action = traj.action.reshape(batch)
+        returns = returns.reshape(batch)
+
+        def loss_fn(outputs):
+            logits, value = outputs
+            advantage = returns - value
+            policy_loss = -jnp.mean(jax.lax.stop_gradient(advantage) * action_log_prob(logits, action))
+            value_loss = jnp.mean(advantage**2)
+            ent = jnp.mean(entropy(logits))
+            return policy_loss + config.vf_coef * value_loss - config.ent_coef * ent, (policy_loss, value_loss, ent)
+
+        def fisher_fn(outputs, key):
+            logits, value = outputs
+            key_action, key_value = jax.random.split(key)
+            sampled = jax.random.categorical(key_action, jax.lax.stop_gradient(logits))
+            target = jax.lax.stop_gradient(value + jax.random.normal(key_value, value.shape))
+            return jnp.sum(action_log_prob(logits, sampled)) - jnp.sum((value - target) ** 2)
+
+        _, (policy_loss, value_loss, ent), grads, stats = kfac.gradients(key_fisher, state.params, (obs,), loss_fn, fisher_fn)
+        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
+        scale = (1.0 - fraction) if config.anneal_lr else jnp.float32(1.0)
+        params, opt_state, info = kfac.update(
+            jax.tree_util.tree_map(lambda g: scale * g, grads), stats, state.opt_state, state.params["params"]
+        )  # annealing η_max ≡ scaling the gradient, as the trust region bounds the product
+        summary = episode_summary(traj)
+        new_state = ACKTRState(
+            {**state.params, "params": params}, opt_state, runner, _key_data(key), state.update + 1,
+            state.episodes + summary["episodes"], state.env_steps + batch,
+        )  # fmt: skip
+        row = {
+            "active": 1.0,
+            "episodes": new_state.episodes,
+            "env_steps": new_state.env_steps,
+            "return": summary["return"],
+            "length": summary["length"],
+            "crashed": summary.get("crashed", jnp.nan),
+            "lap_completed": summary.get("lap_completed", jnp.nan),
+            "progress": summary.get("progress", jnp.nan),
+            "policy_loss": policy_loss,
+            "value_loss": value_loss,
+            "entropy": ent,
+            "approx_kl": 0.5 * info["step_size"] ** 2 * info["fisher_quadratic"],
+            "learning_rate": info["step_size"],
+        }
+        return new_state, {k: jnp.asarray(row[k], jnp.float32) for k in CURVE_FIELDS}
+
+    def done(state: ACKTRState) -> jax.Array:
+        return state.episodes >= config.total_episodes
+
+    def skip(state: ACKTRState) -> tuple[ACKTRState, dict]:
+        return state, {k: jnp.float32(0.0 if k == "active" else jnp.nan) for k in CURVE_FIELDS}
+
+    def guarded(state: ACKTRState, _):
+        return jax.lax.cond(done(state), skip, update, state)
+
+    def train_chunk(state: ACKTRState, n: int) -> tuple[ACKTRState, dict]:
+        return jax.lax.scan(guarded, state, None, length=n)
+
+    train_chunk = jax.jit(train_chunk, static_argnums=1)
+
+    @jax.jit
+    def train(key: jax.Array) -> tuple[ACKTRState, dict]:
+        return train_chunk(init(key), budget)
+
+    return Trainer(init, train_chunk, train, network, budget, done)
+
+
+ALGORITHM = training.Algorithm("acktr", ACKTRConfig, make_train)
+training.register_algorithm(ALGORITHM)

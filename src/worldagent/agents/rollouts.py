@@ -1,0 +1,210 @@
+"""On-policy rollouts for actor-critic agents over a batch of envs on a world distribution.
+
+Shared by PPO and ACKTR (paper §5.3). One call of ``collect`` is one ``lax.scan`` of
+``num_steps`` steps over ``B`` envs at once (``vmap``), pure and jittable::
+
+    runner = init_runner(key, env, env_params, distribution, num_envs)
+    runner, traj, (last_value, _) = collect(key, runner, apply_fn, net_params, env, env_params, distribution, num_steps)
+    advantages, targets = gae(traj.reward, traj.value, traj.done, last_value, gamma, lam)
+
+Worlds (issue 5, "every env in a training batch can be on a different world"): every env
+holds a *pending* world, drawn from the distribution at the start of each ``collect`` (one
+``vmap``'d ``distribution.sample`` per env per segment, not per step: ``G(z)`` decodes and
+searches 10,000 rasters, far too costly to run every step for every env). An episode that
+ends restarts on its env's pending world (``core.step_autoreset(..., next_world=...)``). An
+env that ends two episodes within one segment (early crashes) replays the pending world; the
+next segment draws afresh.
+
+Ends of episodes: ``done = terminated | truncated``, both cut the bootstrap (PureJaxRL's
+convention; the racing observation has no clock, so a time-limit value would be guessed).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from worldagent.envs.core import step_autoreset
+
+# apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])
+ApplyFn = Callable[[Any, jax.Array], tuple[jax.Array, jax.Array]]
+
+
+@struct.dataclass
+class EnvRunner:
+    """The carry of a rollout: a batch of B envs mid-episode.
+
+    Attributes:
+        obs: [B, *obs_shape] current observations.
+        state: the batched env state (leading axis B).
+        episode_return: f32[B] return of each env's episode so far.
+        episode_length: i32[B] steps of each env's episode so far.
+    """
+
+    obs: jax.Array
+    state: Any
+    episode_return: jax.Array
+    episode_length: jax.Array
+
+
+@struct.dataclass
+class Trajectory:
+    """A segment of ``T`` steps of ``B`` envs (every field has leading axes ``[T, B]``).
+
+    Attributes:
+        obs: the observation each action was chosen from.
+        action: i32 actions taken.
+        log_prob: f32 log pi(action | obs) under the policy that acted.
+        value: f32 V(obs) of the critic that acted.
+        reward: f32 rewards.
+        done: bool, the episode ended at this step (terminated or truncated).
+        terminated: bool, it ended by the env's rules (crash, lap), not the time limit.
+        potential: f32 shaping potential Φ of the state each action was chosen from (0
+            without a ``potential_fn``); see ``shaped_rewards``.
+        episode: dict of per-episode metrics, meaningful where ``done``: "return" (f32),
+            "length" (i32) and the env step's ``info`` entries at that step (racing:
+            "crashed", "lap_completed", "progress").
+    """
+
+    obs: jax.Array
+    action: jax.Array
+    log_prob: jax.Array
+    value: jax.Array
+    reward: jax.Array
+    done: jax.Array
+    terminated: jax.Array
+    potential: jax.Array
+    episode: dict
+
+
+def init_runner(key: jax.Array, env, env_params, distribution, num_envs: int) -> EnvRunner:
+    """B envs reset onto B worlds drawn from ``distribution``."""
+    key_worlds, key_reset = jax.random.split(key)
+    worlds = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
+    obs, state = jax.vmap(env.reset, in_axes=(0, 0, None))(jax.random.split(key_reset, num_envs), worlds, env_params)
+    return EnvRunner(obs, state, jnp.zeros(num_envs, jnp.float32), jnp.zeros(num_envs, jnp.int32))
+
+
+def sample_action(key: jax.Array, logits: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(i32[B] actions drawn from the categorical ``logits`` f32[B, A], f32[B] their log-probs)."""
+    action = jax.random.categorical(key, logits).astype(jnp.int32)
+    return action, action_log_prob(logits, action)
+
+
+def action_log_prob(logits: jax.Array, action: jax.Array) -> jax.Array:
+    """f32[...] log-softmax(logits)[action]."""
+    return jnp.take_along_axis(jax.nn.log_softmax(logits), action[..., None], axis=-1)[..., 0]
+
+
+def entropy(logits: jax.Array) -> jax.Array:
+    """f32[...] entropy of the categorical ``logits``."""
+    log_p = jax.nn.log_softmax(logits)
+    return -jnp.sum(jnp.exp(log_p) * log_p, axis=-1)
+
+
+def collect(
+    key: jax.Array,
+    runner: EnvRunner,
+    apply_fn: ApplyFn,
+    net_params: Any,
+    env,
+    env_params,
+    distribution,
+    num_steps: int,
+    potential_fn: Callable[[Any], jax.Array] | None = None,
+) -> tuple[EnvRunner, Trajectory, jax.Array]:
+    """Run the policy for ``num_steps`` steps in every env (see module docstring).
+
+    Args:
+        key: PRNG key.
+        runner: the envs' carry (``init_runner``).
+        apply_fn: ``apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])``.
+        net_params: the actor-critic's parameters.
+        env, env_params: the environment and its params.
+        distribution: a world distribution with ``sample(key) -> world``.
+        num_steps: T, steps per env (static).
+        potential_fn: optional ``Φ(env_state) -> f32`` (one env) recorded for reward shaping.
+
+    Returns:
+        ``(runner, trajectory [T, B], last)``: the carry to continue from, the segment, and
+        ``last = (value f32[B], potential f32[B])`` of the state after its last step (for
+        bootstrapping and shaping).
+    """
+    num_envs = runner.episode_return.shape[0]
+    key_worlds, key_steps = jax.random.split(key)
+    pending = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
+    step_env = jax.vmap(lambda k, s, a, w: step_autoreset(env, k, s, a, env_params, next_world=w))
+    potential = (lambda state: jnp.zeros(num_envs, jnp.float32)) if potential_fn is None else jax.vmap(potential_fn)
+
+    def one_step(runner: EnvRunner, step_key):
+        key_act, key_env = jax.random.split(step_key)
+        logits, value = apply_fn(net_params, runner.obs)
+        action, log_prob = sample_action(key_act, logits)
+        obs, state, reward, terminated, truncated, info = step_env(jax.random.split(key_env, num_envs), runner.state, action, pending)
+        done = jnp.logical_or(terminated, truncated)
+        episode_return = runner.episode_return + reward
+        episode_length = runner.episode_length + 1
+        episode = {"return": episode_return, "length": episode_length, **info}
+        record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, potential(runner.state), episode)
+        runner = EnvRunner(obs, state, jnp.where(done, 0.0, episode_return), jnp.where(done, 0, episode_length))
+        return runner, record
+
+    runner, trajectory = jax.lax.scan(one_step, runner, jax.random.split(key_steps, num_steps))
+    _, last_value = apply_fn(net_params, runner.obs)
+    return runner, trajectory, (last_value, potential(runner.state))
+
+
+def shaped_rewards(trajectory: Trajectory, last_potential: jax.Array, gamma: float) -> jax.Array:
+    """f32[T, B] ``r + γΦ(s') - Φ(s)`` (potential-based shaping, Ng et al. 1999; Φ = 0 after an episode ends)."""
+    next_potential = jnp.concatenate([trajectory.potential[1:], last_potential[None]], axis=0)
+    return trajectory.reward + gamma * next_potential * (1.0 - trajectory.done.astype(jnp.float32)) - trajectory.potential
+
+
+def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[jax.Array, jax.Array]:
+    """Generalised advantage estimation (Schulman et al. 2016) over a ``[T, B]`` segment.
+
+    Returns:
+        ``(advantages f32[T, B], value targets f32[T, B] = advantages + values)``.
+    """
+
+    def backward(carry, step):
+        advantage, next_value = carry
+        reward, value, done = step
+        not_done = 1.0 - done.astype(jnp.float32)
+        delta = reward + gamma * next_value * not_done - value
+        advantage = delta + gamma * lam * not_done * advantage
+        return (advantage, value), advantage
+
+    _, advantages = jax.lax.scan(
+        backward, (jnp.zeros_like(last_value), last_value), (rewards, values, dones), reverse=True
+    )
+    return advantages, advantages + values
+
+
+def nstep_returns(rewards, dones, last_value, gamma: float) -> jax.Array:
+    """f32[T, B] discounted n-step returns bootstrapped from ``last_value`` (A2C / ACKTR targets)."""
+
+    def backward(next_return, step):
+        reward, done = step
+        ret = reward + gamma * next_return * (1.0 - done.astype(jnp.float32))
+        return ret, ret
+
+    _, returns = jax.lax.scan(backward, last_value, (rewards, dones), reverse=True)
+    return returns
+
+
+def episode_summary(trajectory: Trajectory) -> dict[str, jax.Array]:
+    """Means over the episodes that ended in a segment, and their count.
+
+    Returns:
+        ``{"episodes": i32 count, "return": mean raw return, "length": mean steps, and the mean
+        of every other per-episode entry (racing: crash rate, lap rate, progress)}``; NaN means
+        when no episode ended.
+    """
+    done = trajectory.done
+    count = done.sum()
+    mean = lambda x: jnp.where(count > 0, jnp.sum(jnp.where(done, x.astype(jnp.float32), 0.0)) / jnp.maximum(count, 1), jnp.nan)  # noqa: E731
+    return {"episodes": count.astype(jnp.int32), **{name: mean(value) for name, value in trajectory.episode.items()}}

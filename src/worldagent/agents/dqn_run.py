@@ -26,6 +26,7 @@ from worldagent.agents.dqn import DQNConfig, chunk_key, check_algorithm, make_ac
 from worldagent.envs.core import rollout
 from worldagent.envs.harvest.env import NUM_ACTIONS, NUM_AGENTS
 from worldagent.errors import WorldagentError
+from worldagent.files import write_bytes
 
 class TrainResult(NamedTuple):
     """What ``train_harvest`` returns.
@@ -45,14 +46,6 @@ class TrainResult(NamedTuple):
     wall_s: float
     env_steps: int
     resumed_chunks: int
-
-
-def _write_atomic(path, blob: bytes) -> None:
-
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(blob)
-    tmp.replace(path)
 
 
 def config_to_dict(config: DQNConfig) -> dict:
@@ -146,7 +139,7 @@ def write_curve(directory, history: list, picture: bool = True) -> None:
     text.write(",".join(CURVE_FIELDS) + "\n")
     for row in history:
         text.write(",".join(f"{row[k]:.6g}" if isinstance(row[k], float) else str(row[k]) for k in CURVE_FIELDS) + "\n")
-    _write_atomic(directory / "curve.csv", text.getvalue().encode())
+    write_bytes(directory / "curve.csv", text.getvalue().encode())
     if not history or not picture:
         return
     import matplotlib
@@ -164,7 +157,7 @@ def write_curve(directory, history: list, picture: bool = True) -> None:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=90)
     plt.close(fig)
-    _write_atomic(directory / "curve.png", buffer.getvalue())
+    write_bytes(directory / "curve.png", buffer.getvalue())
 
 
 def train_harvest(config: DQNConfig, distribution: Any, out_dir=None, progress: bool = True, resume: bool = True, algo: str = "dqn") -> TrainResult:
@@ -217,11 +210,11 @@ def train_harvest(config: DQNConfig, distribution: Any, out_dir=None, progress: 
             raise WorldagentError(f"checkpoint in {out} is inconsistent (corrupt or half-written); pass resume=False or another out_dir.")
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        _write_atomic(out / "config.json", json_dumps(config_to_dict(config)))
+        write_bytes(out / "config.json", json_dumps(config_to_dict(config)))
 
     def save_checkpoint(wall: float) -> None:
-        _write_atomic(out / "checkpoint.msgpack", serialization.to_bytes(jax.device_get(state)))
-        _write_atomic(out / "checkpoint.json", json_dumps({"chunks_done": done, "wall_s": wall, "seed": config.seed, "versions": _versions(),
+        write_bytes(out / "checkpoint.msgpack", serialization.to_bytes(jax.device_get(state)))
+        write_bytes(out / "checkpoint.json", json_dumps({"chunks_done": done, "wall_s": wall, "seed": config.seed, "versions": _versions(),
                                                           "device": str(jax.devices()[0].device_kind), "history": history}))
         write_curve(out, history, picture=done == config.num_chunks)
 

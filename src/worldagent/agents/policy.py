@@ -36,6 +36,7 @@ from flax import struct
 
 from worldagent.agents.networks import build_network, network_config
 from worldagent.errors import WorldagentError
+from worldagent.files import write_bytes
 
 FORMAT_VERSION = 1
 PARAMS_FILE = "policy.msgpack"
@@ -188,8 +189,8 @@ def save_policy(
         "training": training or {},
         "extra": extra or {},
     }
-    _write_atomic(directory / PARAMS_FILE, flax.serialization.to_bytes(jax.device_get(params)))
-    _write_atomic(directory / CONFIG_FILE, json.dumps(config, indent=1).encode())
+    write_bytes(directory / PARAMS_FILE, flax.serialization.to_bytes(jax.device_get(params)))
+    write_bytes(directory / CONFIG_FILE, json.dumps(config, indent=1).encode())
     return directory
 
 
@@ -253,12 +254,6 @@ def _check_params_match(params: Any, template: Any, what: str) -> None:
     for leaf, spec in zip(jax.tree_util.tree_leaves(params), jax.tree_util.tree_leaves(template)):
         if np.shape(leaf) != spec.shape:
             raise WorldagentError(f"{what} hold a layer of shape {np.shape(leaf)} where the architecture has {spec.shape}; they are from another network.")
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
 
 
 # -- scripted reference policies ----------------------------------------------------------------

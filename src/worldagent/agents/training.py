@@ -29,6 +29,7 @@ import numpy as np
 from worldagent.agents import ppo
 from worldagent.agents.policy import SavedPolicy, load_policy, save_policy
 from worldagent.errors import WorldagentError
+from worldagent.files import write_atomically, write_bytes
 from worldagent.progress import progress_bar
 
 CHECKPOINT_FILE = "checkpoint.msgpack"
@@ -101,12 +102,6 @@ def _versions() -> dict:
     return {"worldagent": getattr(worldagent, "__version__", "?"), "jax": jax.__version__, "flax": flax.__version__, "optax": optax.__version__}
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
-
-
 def _read_curve(path: Path) -> list[dict]:
     if not path.is_file():
         return []
@@ -116,12 +111,14 @@ def _read_curve(path: Path) -> list[dict]:
 
 def _write_curve(path: Path, rows: list[dict]) -> None:
     fields = ["update", "wall_seconds", *ppo.CURVE_FIELDS]
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-    tmp.replace(path)
+
+    def save(tmp: Path) -> None:
+        with open(tmp, "w", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=fields)
+            writer.writeheader()
+            writer.writerows(rows)
+
+    write_atomically(path, save)
 
 
 def plot_curve(rows: list[dict], path: Path) -> Path:
@@ -140,10 +137,8 @@ def plot_curve(rows: list[dict], path: Path) -> Path:
     ax_rate.set(xlabel="episodes", ylim=(0, 1))
     ax_rate.legend()
     fig.tight_layout()
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=100)
+    write_atomically(path, lambda tmp: fig.savefig(tmp, dpi=100, format="png"))
     plt.close(fig)
-    tmp.replace(path)
     return path
 
 
@@ -221,7 +216,7 @@ def train_racing(
         rows = _read_curve(out_dir / CURVE_FILE)
         rows = [r for r in rows if r["update"] <= int(state.update)]
         resumed_from = int(state.update)
-    _write_atomic(out_dir / RUN_FILE, json.dumps(run, indent=1).encode())
+    write_bytes(out_dir / RUN_FILE, json.dumps(run, indent=1).encode())
 
     start = time.perf_counter()
     offset = rows[-1]["wall_seconds"] if rows else 0.0
@@ -239,7 +234,7 @@ def train_racing(
             elapsed = offset + time.perf_counter() - start
             for n, i in enumerate(ran):
                 rows.append({"update": first + n + 1, "wall_seconds": round(elapsed, 3), **{k: float(curve[k][i]) for k in ppo.CURVE_FIELDS}})
-            _write_atomic(checkpoint, flax.serialization.to_bytes(jax.device_get(state)))
+            write_bytes(checkpoint, flax.serialization.to_bytes(jax.device_get(state)))
             _write_curve(out_dir / CURVE_FILE, rows)
             last = rows[-1] if rows else {}
             advance(min(int(state.episodes), total) - min(before, total),

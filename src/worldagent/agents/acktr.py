@@ -30,7 +30,7 @@ from flax import struct
 from worldagent.agents import training
 from worldagent.agents.kfac import KFAC, KFACConfig, KFACState
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.ppo import CURVE_FIELDS, Trainer, max_updates
+from worldagent.agents.ppo import CURVE_FIELDS, Trainer, budgeted_trainer, max_updates
 from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
 from worldagent.errors import WorldagentError
 
@@ -245,25 +245,7 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
         }
         return new_state, {k: jnp.asarray(row[k], jnp.float32) for k in CURVE_FIELDS}
 
-    def done(state: ACKTRState) -> jax.Array:
-        return state.episodes >= config.total_episodes
-
-    def skip(state: ACKTRState) -> tuple[ACKTRState, dict]:
-        return state, {k: jnp.float32(0.0 if k == "active" else jnp.nan) for k in CURVE_FIELDS}
-
-    def guarded(state: ACKTRState, _):
-        return jax.lax.cond(done(state), skip, update, state)
-
-    def train_chunk(state: ACKTRState, n: int) -> tuple[ACKTRState, dict]:
-        return jax.lax.scan(guarded, state, None, length=n)
-
-    train_chunk = jax.jit(train_chunk, static_argnums=1)
-
-    @jax.jit
-    def train(key: jax.Array) -> tuple[ACKTRState, dict]:
-        return train_chunk(init(key), budget)
-
-    return Trainer(init, train_chunk, train, network, budget, done)
+    return budgeted_trainer(init, update, config.total_episodes, budget, network)
 
 
 ALGORITHM = training.Algorithm("acktr", ACKTRConfig, make_train)

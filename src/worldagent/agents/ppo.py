@@ -208,6 +208,32 @@ def max_updates(total_episodes: int, num_envs: int, num_steps: int, max_episode_
     return math.ceil(math.ceil(total_episodes / num_envs) * max_episode_steps / num_steps) + 1
 
 
+
+def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budget: int, network: Any) -> "Trainer":
+    """A ``Trainer`` from ``init(key) -> state`` and ``update(state) -> (state, curve row)``.
+
+    Updates run in jitted chunks (``lax.scan``); once ``total_episodes`` episodes have ended the
+    remaining ones are skipped (their curve rows NaN, ``active`` 0), so a chunk may overshoot
+    the budget harmlessly. ``budget`` is the number of updates ``train(key)`` scans.
+    """
+
+    def done(state) -> jax.Array:
+        return state.episodes >= total_episodes
+
+    def skip(state):
+        return state, {k: jnp.float32(0.0 if k == "active" else jnp.nan) for k in CURVE_FIELDS}
+
+    def guarded(state, _):
+        return jax.lax.cond(done(state), skip, update, state)
+
+    train_chunk = jax.jit(lambda state, n: jax.lax.scan(guarded, state, None, length=n), static_argnums=1)
+
+    @jax.jit
+    def train(key: jax.Array):
+        return train_chunk(init(key), budget)
+
+    return Trainer(init, train_chunk, train, network, budget, done)
+
 def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
     """PPO on ``env`` with each episode's world drawn from ``distribution``.
 
@@ -312,22 +338,4 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
         }
         return new_state, {k: jnp.asarray(row[k], jnp.float32) for k in CURVE_FIELDS}
 
-    def done(state: PPOState) -> jax.Array:
-        return state.episodes >= config.total_episodes
-
-    def skip(state: PPOState) -> tuple[PPOState, dict]:
-        return state, {k: jnp.float32(0.0 if k == "active" else jnp.nan) for k in CURVE_FIELDS}
-
-    def guarded(state: PPOState, _):
-        return jax.lax.cond(done(state), skip, update, state)
-
-    def train_chunk(state: PPOState, n: int) -> tuple[PPOState, dict]:
-        return jax.lax.scan(guarded, state, None, length=n)
-
-    train_chunk = jax.jit(train_chunk, static_argnums=1)
-
-    @jax.jit
-    def train(key: jax.Array) -> tuple[PPOState, dict]:
-        return train_chunk(init(key), budget)
-
-    return Trainer(init, train_chunk, train, network, budget, done)
+    return budgeted_trainer(init, update, config.total_episodes, budget, network)

@@ -19,7 +19,6 @@ counted in episodes and updates after it is spent are skipped), so the host loop
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,11 +31,12 @@ from worldagent.agents.kfac import KFAC, KFACConfig, KFACState
 from worldagent.agents.networks import ActorCritic
 from worldagent.agents.ppo import CURVE_FIELDS, Trainer, budgeted_trainer, max_updates
 from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
+from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
 
 
 @dataclass(frozen=True)
-class ACKTRConfig:
+class ACKTRConfig(JsonConfig):
     """ACKTR settings. Sources: ikostrikov = pytorch-a2c-ppo-acktr (the paper's implementation),
     baselines = OpenAI baselines ``acktr``; "tuned" = changed from those to reach the issue's
     targets within the paper's budget on 2 CPU cores (see the field).
@@ -112,19 +112,6 @@ class ACKTRConfig:
             learning_rate=self.learning_rate, kl_clip=self.kl_clip, momentum=self.momentum,
             stat_decay=self.stat_decay, damping=self.damping, inverse_every=self.inverse_every,
         )  # fmt: skip
-
-    def to_dict(self) -> dict:
-        """JSON-able fields."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, fields: dict) -> "ACKTRConfig":
-        """Inverse of ``to_dict``; unknown fields are refused."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(fields) - known
-        if unknown:
-            raise WorldagentError(f"ACKTR config has unknown fields {sorted(unknown)}; remove them (known: {', '.join(sorted(known))}).")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()})
 
 
 @struct.dataclass

@@ -18,7 +18,6 @@ updates that did not run (``curve["active"]`` is False there).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any, Callable, NamedTuple
@@ -32,11 +31,12 @@ from worldagent.agents.networks import ActorCritic
 from worldagent.agents.rollouts import (
     EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, shaped_rewards,
 )
+from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
 
 
 @dataclass(frozen=True)
-class PPOConfig:
+class PPOConfig(JsonConfig):
     """PPO settings; the defaults are the paper's racing budget (10,000 episodes).
 
     What the defaults reach (benchmarks/train_racing.py, 2 CPU cores): about 65 s for the
@@ -125,19 +125,6 @@ class PPOConfig:
         if self.activation not in ("tanh", "relu"):
             raise WorldagentError(f"PPOConfig.activation={self.activation!r}; use 'tanh' or 'relu'.")
         object.__setattr__(self, "hidden", tuple(self.hidden))
-
-    def to_dict(self) -> dict:
-        """JSON-able fields."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, fields: dict) -> "PPOConfig":
-        """Inverse of ``to_dict``; unknown fields are refused."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(fields) - known
-        if unknown:
-            raise WorldagentError(f"PPO config has unknown fields {sorted(unknown)}; remove them (known: {', '.join(sorted(known))}).")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()})
 
 
 @struct.dataclass

@@ -99,7 +99,7 @@ def test_train_commands_write_an_agent_that_search_can_load(tmp_path):
     assert (run / "curve.csv").exists() and (run / "curve.png").exists() and (run / "policy" / "policy.json").exists()
     result = runner.invoke(app, ["train", "harvest", "--episodes", "8", "--tagger", "0", "--out", str(tmp_path / "dqn"), "--quiet"])
     assert result.exit_code == 0, result.output
-    from worldagent.cli import _agent
+    from worldagent.commands.common import agent_policy as _agent
 
     assert _agent("racing", str(run), greedy=False).params is not None
     assert _agent("harvest", str(tmp_path / "dqn"), greedy=False).params is not None

@@ -5,14 +5,13 @@ Every command turns a ``WorldagentError`` into one red line and exit code 2, nev
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import numpy as np
 import typer
-from rich.console import Console
-from rich.markup import escape
 
+from worldagent.commands import register_all
+from worldagent.commands.common import AGENT_HELP, ENV_HELP, campaign, console, friendly_errors
 from worldagent.errors import WorldagentError
 
 app = typer.Typer(
@@ -20,7 +19,6 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
-console = Console(stderr=True, soft_wrap=True)  # never break a message across lines
 
 
 def _print_version(value: bool) -> None:
@@ -36,20 +34,6 @@ def root(
     version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."),
 ) -> None:
     """Find the worlds in which trained RL agents fail or shine, and reshape what they train on."""
-
-
-def friendly_errors(command):
-    """Decorator: report ``WorldagentError`` as one line on stderr and exit with code 2."""
-
-    @functools.wraps(command)
-    def wrapper(*args, **kwargs):
-        try:
-            return command(*args, **kwargs)
-        except WorldagentError as error:
-            console.print(f"[red]error:[/red] {escape(str(error))}", soft_wrap=True)  # one line, no markup
-            raise typer.Exit(code=2) from None
-
-    return wrapper
 
 
 @app.command()
@@ -127,7 +111,6 @@ def maps(
     console.print(f"wrote {n} maps to {out}")
 
 
-ENV_HELP = "Environment: racing or harvest."
 
 
 @app.command()
@@ -234,56 +217,6 @@ def generator_report(
     typer.echo(json.dumps(figures, indent=1))
 
 
-def _env_and_params(env: str, tagger: list[int]):
-    """The env object and its params; harvest agents listed in ``tagger`` may TAG (§6.2.2)."""
-    if env == "racing":
-        from worldagent.envs.racing.env import ParticleRacing
-
-        if tagger:
-            raise WorldagentError("--tagger applies to harvest only.")
-        racing = ParticleRacing()
-        return racing, racing.default_params
-    if env == "harvest":
-        from worldagent.envs.harvest import Harvest, make_params
-
-        if any(not 0 <= i < 4 for i in tagger):
-            raise WorldagentError(f"--tagger {tagger}: agents are numbered 0 to 3.")
-        return Harvest(), make_params(can_tag=[i in tagger for i in range(4)])
-    raise WorldagentError(f"unknown environment {env!r}; use racing or harvest.")
-
-
-def _agent(env: str, spec: str, greedy: bool):
-    """A saved agent (its directory, or the `train` run directory holding it), or a scripted policy by name."""
-    from worldagent.agents.policy import CONFIG_FILE, load_policy, scripted_policy
-
-    path = Path(spec)
-    if path.is_dir():
-        found = next((p for p in (path, path / "policy", path / "agents") if (p / CONFIG_FILE).exists()), path)
-        return load_policy(found, env=env, greedy=greedy).policy
-    return scripted_policy(env, spec)
-
-
-def _campaign(env, agent, generator, objective, maximize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet, config=None):
-    """Run one campaign from CLI options; returns its evaluations and spec."""
-    from worldagent.search.campaign import CampaignSpec, run_campaign
-    from worldagent.search.objectives import LatentObjective, Objective, metric_name
-    from worldagent.search.optimisers import OptimiserConfig
-    from worldagent.store import RunStore
-    from worldagent.worlds.generator import load_generator
-
-    target = Objective(env, metric_name(env, objective), maximize)
-    env_obj, params = _env_and_params(env, tagger)
-    policy = _agent(env, agent, greedy)
-    G, _, _ = load_generator(generator)
-    evaluate = LatentObjective(target, env_obj, policy, G, repeats, params)
-    spec = CampaignSpec(name, env, target.metric, maximize, optimiser, budget, seed, G.latent_dim, config or OptimiserConfig())
-    with RunStore(out) as store:
-        return run_campaign(store, spec, evaluate, resume=resume, progress=not quiet), spec
-
-
-AGENT_HELP = "A `worldagent train` run directory (or the agent directory in it), or a scripted policy: driver (racing), random or greedy (harvest)."
-
-
 @app.command()
 @friendly_errors
 def search(
@@ -308,7 +241,7 @@ def search(
 
     direction = "min" if minimize else "max"
     name = name or f"{optimiser}-{direction}-{metric_name(env, objective)}-s{seed}"
-    evaluations, spec = _campaign(env, agent, generator, objective, not minimize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet)
+    evaluations, spec = campaign(env, agent, generator, objective, not minimize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet)
     scores = np.array([e.score for e in evaluations])
     best = evaluations[int(np.nanargmin(scores) if minimize else np.nanargmax(scores))]
     console.print(
@@ -344,7 +277,7 @@ def evaluate_random(
 
     config = OptimiserConfig(random_batch=min(max(worlds, 1), 250))
     name = f"random-{metric_name(env, metric)}-s{seed}"
-    evaluations, spec = _campaign(env, agent, generator, metric, True, "random", worlds, repeats, seed, out, name, resume, tagger, greedy, quiet, config)
+    evaluations, spec = campaign(env, agent, generator, metric, True, "random", worlds, repeats, seed, out, name, resume, tagger, greedy, quiet, config)
     scores = np.array([e.score for e in evaluations])
     figure = distribution_figure({"random worlds": scores}, spec.objective, out / f"{name}.png", f"{env}: {spec.objective} over {len(scores)} random worlds")
     line = f"{name}: {len(scores)} worlds x {repeats} episodes; {spec.objective} mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})"
@@ -404,3 +337,6 @@ def train(
     config = DQNConfig(num_episodes=episodes or DQNConfig.num_episodes, tagger=tagger[0] if tagger else None, seed=seed)
     result = train_harvest(config, distribution, out, progress=not quiet, resume=resume)
     console.print(f"trained 4 DQNs for {config.num_chunks * config.num_envs:,} episodes ({result.env_steps:,} steps, {result.wall_s:.0f} s) -> {out}")
+
+
+register_all(app)  # the commands defined in worldagent/commands/*.py

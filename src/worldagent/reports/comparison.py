@@ -1,0 +1,219 @@
+"""How efficiently each optimiser finds extreme worlds (paper §6.1.3, Figure 7).
+
+The yardstick is the random distribution (Figure 6a): a world "at the q quantile" is one that
+random sampling finds with probability q per draw, i.e. after 1/q draws on average (10, 20 and
+100 for q = 0.1, 0.05, 0.01). For each optimiser and seed we count the evaluated worlds it took
+to first reach a score at or beyond that quantile. A seed that never reaches it is reported as
+such — never as a made-up number — and the median over seeds counts it as "later than any
+budget", so the median itself is "not reached" when half the seeds or more never got there.
+
+``runs`` everywhere is ``{optimiser: [f[n] scores in evaluation order, one array per seed]}``,
+as ``search.experiments.compare_optimisers`` returns it.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from worldagent.errors import WorldagentError
+from worldagent.files import write_atomically, write_text
+
+QUANTILES = (0.1, 0.05, 0.01)
+
+
+def thresholds(random_scores: np.ndarray, quantiles: Sequence[float], maximize: bool) -> dict[float, float]:
+    """The score of each tail quantile of the random distribution (upper tail when maximising)."""
+    scores = _finite(random_scores, "random scores")
+    for q in quantiles:
+        if not 0.0 < q < 1.0:
+            raise WorldagentError(f"quantile {q}; pass tail fractions strictly between 0 and 1 (e.g. 0.05).")
+    return {q: float(np.quantile(scores, 1.0 - q if maximize else q)) for q in quantiles}
+
+
+def evaluations_to_reach(scores: np.ndarray, threshold: float, maximize: bool) -> int | None:
+    """1-based number of the first evaluation at or beyond ``threshold``; None if none is."""
+    scores = np.asarray(scores, np.float64)
+    hit = scores >= threshold if maximize else scores <= threshold  # NaN never counts as a hit
+    return int(np.argmax(hit)) + 1 if hit.any() else None
+
+
+def censored_median(counts: Sequence[int | None]) -> float | None:
+    """Median of counts where None means "not within the budget" (+inf); None if the median is."""
+    values = np.array([np.inf if c is None else c for c in counts], np.float64)
+    median = float(np.median(values))
+    return median if np.isfinite(median) else None
+
+
+def best_so_far(scores: np.ndarray, maximize: bool) -> np.ndarray:
+    """f[n]: the best score among the first i + 1 evaluations (NaN scores ignored)."""
+    scores = np.asarray(scores, np.float64)
+    filled = np.where(np.isfinite(scores), scores, -np.inf if maximize else np.inf)
+    return np.maximum.accumulate(filled) if maximize else np.minimum.accumulate(filled)
+
+
+def sample_efficiency(runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, quantiles: Sequence[float] = QUANTILES, maximize: bool = False) -> list[dict]:
+    """One row per optimiser: evaluations to reach the random distribution's tail quantiles.
+
+    Args:
+        runs: {optimiser: per-seed f[n] scores in evaluation order}.
+        random_scores: f[m] the metric on random worlds (the reference distribution).
+        quantiles: tail fractions q; the target is the random q-quantile (1 - q when maximising).
+        maximize: the direction the optimisers pushed.
+
+    Returns:
+        A list of dicts with: ``optimiser``; ``seeds``; ``evaluations`` (worlds per seed, the
+        smallest if they differ); ``best_mean`` / ``best_sd`` (the best score of each seed: mean and
+        sample standard deviation, NaN for one seed); ``mean_sampled`` (mean over all sampled
+        worlds); and per quantile q: ``threshold_q{q}`` (the target score), ``reach_q{q}`` (per seed,
+        evaluations to reach it or None), ``median_q{q}`` (``censored_median`` of those) and
+        ``never_q{q}`` (seeds that did not reach it).
+    """
+    if not runs:
+        raise WorldagentError("no optimiser runs to compare; run compare_optimisers first.")
+    targets = thresholds(random_scores, quantiles, maximize)
+    rows = []
+    for name, seeds in runs.items():
+        if not seeds or any(len(s) == 0 for s in seeds):
+            raise WorldagentError(f"optimiser {name!r} has a seed without evaluations; run its campaigns first.")
+        bests = np.array([best_so_far(s, maximize)[-1] for s in seeds])
+        pooled = np.concatenate([np.asarray(s, np.float64) for s in seeds])
+        row = {
+            "optimiser": name,
+            "seeds": len(seeds),
+            "evaluations": min(len(s) for s in seeds),
+            "best_mean": float(np.mean(bests)),
+            "best_sd": float(np.std(bests, ddof=1)) if len(bests) > 1 else float("nan"),
+            "mean_sampled": float(np.nanmean(pooled)),
+        }
+        for q, threshold in targets.items():
+            reach = [evaluations_to_reach(s, threshold, maximize) for s in seeds]
+            row[f"threshold_q{q:g}"] = threshold
+            row[f"reach_q{q:g}"] = reach
+            row[f"median_q{q:g}"] = censored_median(reach)
+            row[f"never_q{q:g}"] = sum(r is None for r in reach)
+        rows.append(row)
+    return rows
+
+
+def _quantiles_of(rows: list[dict]) -> list[str]:
+    """The quantile labels ("0.1", ...) the rows were computed for, in order."""
+    return [key[len("median_q"):] for key in rows[0] if key.startswith("median_q")] if rows else []
+
+
+def _reach_cell(row: dict, q: str) -> str:
+    """"12 (1 never)" — the median count and how many seeds never reached the target."""
+    median, never, seeds = row[f"median_q{q}"], row[f"never_q{q}"], row["seeds"]
+    text = "not reached" if median is None else f"{median:g}"
+    return f"{text} ({never}/{seeds} never)" if never else text
+
+
+def comparison_table_markdown(rows: list[dict], metric: str = "score", maximize: bool = False) -> str:
+    """A Markdown table of ``sample_efficiency`` rows, with a note on how to read it."""
+    if not rows:
+        raise WorldagentError("no rows to tabulate; compute sample_efficiency first.")
+    labels = _quantiles_of(rows)
+    sign = "≥" if maximize else "≤"
+    head = ["optimiser", "seeds", "worlds/seed", *[f"worlds to {sign} q{q} ({rows[0][f'threshold_q{q}']:.4g})" for q in labels], f"best {metric} (mean ± sd)", f"mean {metric} sampled"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for row in rows:
+        sd = "" if np.isnan(row["best_sd"]) else f" ± {row['best_sd']:.3g}"
+        cells = [row["optimiser"], str(row["seeds"]), str(row["evaluations"]), *[_reach_cell(row, q) for q in labels], f"{row['best_mean']:.4g}{sd}", f"{row['mean_sampled']:.4g}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    tail = "lower" if not maximize else "upper"
+    expected = ", ".join(f"q{q}: {1 / float(q):g}" for q in labels)
+    lines.append("")
+    lines.append(
+        f"Worlds to reach the {tail} q-quantile of the random distribution: median over seeds of the evaluations "
+        f"until the first world scoring {sign} that value ('never': seeds that did not within their budget). "
+        f"Random sampling needs 1/q worlds on average ({expected})."
+    )
+    return "\n".join(lines) + "\n"
+
+
+def comparison_csv(rows: list[dict]) -> str:
+    """The rows as CSV; per-seed counts joined by ';' with "never" for a seed that did not reach."""
+    import csv
+
+    if not rows:
+        raise WorldagentError("no rows to write; compute sample_efficiency first.")
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]))
+    writer.writeheader()
+    for row in rows:
+        cells = {}
+        for key, value in row.items():
+            if isinstance(value, list):
+                value = ";".join("never" if v is None else str(v) for v in value)
+            cells[key] = "not reached" if value is None else value
+        writer.writerow(cells)
+    return buffer.getvalue()
+
+
+def write_comparison(rows: list[dict], out_dir: Path | str, metric: str = "score", maximize: bool = False) -> tuple[Path, Path]:
+    """Write ``comparison.md`` and ``comparison.csv`` into ``out_dir`` (atomically)."""
+    out_dir = Path(out_dir)
+    return (
+        write_text(out_dir / "comparison.md", comparison_table_markdown(rows, metric, maximize)),
+        write_text(out_dir / "comparison.csv", comparison_csv(rows)),
+    )
+
+
+def comparison_figure(runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, out: Path | str, maximize: bool = False, bins: int = 30) -> Path:
+    """Figure 7 and a best-so-far curve, side by side, to PNG.
+
+    Left: the distribution of the scores of every world each optimiser sampled (all seeds
+    pooled) against the random distribution. Right: the best score found so far against the
+    number of evaluated worlds, median over seeds with the min–max band, and the random
+    distribution's mean and tail quantiles as reference lines.
+    """
+    from worldagent.reports.figures import _pyplot
+
+    if not runs:
+        raise WorldagentError("no optimiser runs to draw; run compare_optimisers first.")
+    plt = _pyplot()
+    random_scores = _finite(random_scores, "random scores")
+    colours = plt.get_cmap("tab10")
+    figure, (left, right) = plt.subplots(1, 2, figsize=(12, 4.4), dpi=120)
+
+    pooled = {name: np.concatenate([np.asarray(s, np.float64) for s in seeds]) for name, seeds in runs.items()}
+    everything = np.concatenate([random_scores, *[v[np.isfinite(v)] for v in pooled.values()]])
+    edges = np.histogram_bin_edges(everything, bins=bins)
+    left.hist(random_scores, bins=edges, density=True, color="0.55", alpha=0.6, label=f"random worlds (n={len(random_scores)}, mean {random_scores.mean():.3g})")
+    for i, (name, values) in enumerate(pooled.items()):
+        values = values[np.isfinite(values)]
+        left.hist(values, bins=edges, density=True, histtype="step", linewidth=2, color=colours(i), label=f"{name} (n={len(values)}, mean {values.mean():.3g})")
+    left.set_xlabel(metric)
+    left.set_ylabel("density of worlds")
+    left.set_title(f"worlds sampled while {'maximising' if maximize else 'minimising'} {metric}")
+    left.legend(fontsize=8)
+
+    for i, (name, seeds) in enumerate(runs.items()):
+        length = min(len(s) for s in seeds)
+        curves = np.stack([best_so_far(s, maximize)[:length] for s in seeds])
+        x = np.arange(1, length + 1)
+        right.plot(x, np.median(curves, axis=0), color=colours(i), linewidth=2, label=f"{name} (median of {len(seeds)} seeds)")
+        right.fill_between(x, curves.min(axis=0), curves.max(axis=0), color=colours(i), alpha=0.15, linewidth=0)
+    right.axhline(random_scores.mean(), color="0.3", linestyle="-", linewidth=1, label="random mean")
+    for q, value in thresholds(random_scores, (0.1, 0.01), maximize).items():
+        right.axhline(value, color="0.3", linestyle=":" if q < 0.05 else "--", linewidth=1, label=f"random {'top' if maximize else 'bottom'} {q:.0%}")
+    right.set_xlabel("evaluated worlds")
+    right.set_ylabel(f"best {metric} so far")
+    right.set_title("best world found vs evaluations")
+    right.legend(fontsize=8)
+    figure.tight_layout()
+    path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png"))
+    plt.close(figure)
+    return path
+
+
+def _finite(values: np.ndarray, what: str) -> np.ndarray:
+    """The finite entries of ``values``; an error naming ``what`` if there are none."""
+    values = np.asarray(values, np.float64).ravel()
+    values = values[np.isfinite(values)]
+    if len(values) == 0:
+        raise WorldagentError(f"{what} hold no finite value; evaluate some random worlds first.")
+    return values

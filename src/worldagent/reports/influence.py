@@ -1,0 +1,121 @@
+"""Figure 8 of the paper: default against influenced training, and worlds of the new distribution.
+
+Left, one small panel per metric (their scales differ: a raw return of -300 next to a crash
+rate of 0.1 would flatten the rates) with a bar for each training regime and its 95%
+confidence interval over seeds; right, up to four example worlds of the influenced training
+distribution, drawn as the envs draw them (racing ``track_image``, harvest ``draw_map`` with the
+tagging agent 0 in blue).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from worldagent.errors import WorldagentError
+from worldagent.files import write_atomically
+from worldagent.reports.figures import _pyplot
+
+LABELS = {
+    "return": "reward (raw)",
+    "normalised_return": "normalised reward",
+    "crashed": "crash rate",
+    "lap_completed": "lap rate",
+    "group_reward": "group reward",
+    "conflict": "conflict",
+    "equality": "equality",
+}
+COLOURS = {"default": "#8c8c8c", "influenced": "#2b6cb0"}
+MAX_EXAMPLES = 4
+UNIT_METRICS = {"normalised_return", "crashed", "lap_completed", "equality"}  # rates and [0, 1] scores share one scale
+
+
+def metric_label(metric: str) -> str:
+    """The paper's name of a metric (``crashed`` is the crash rate)."""
+    return LABELS.get(metric, metric.replace("_", " "))
+
+
+def world_image(env_name: str, world: Any) -> np.ndarray:
+    """uint8[H, W, 3] picture of one (unbatched) world."""
+    if env_name == "racing":
+        from worldagent.envs.racing.render import track_image
+
+        return np.asarray(track_image(world, size=192))
+    if env_name == "harvest":
+        from worldagent.envs.harvest.render import draw_map
+
+        return np.asarray(draw_map(world, cell=8))
+    raise WorldagentError(f"unknown environment {env_name!r}; use racing or harvest.")
+
+
+def _interval(entry: dict) -> float:
+    """The CI half-width; NaN (no error bar drawn) when unknown (one seed: NaN in memory, null in JSON)."""
+    value = entry.get("ci95")
+    return float("nan") if value is None else float(value)
+
+
+def influence_figure(result: dict, example_worlds: Any, env_name: str, out: Path | str) -> Path:
+    """Draw Figure 8 for one environment to ``out`` (PNG, written atomically).
+
+    Args:
+        result: what ``influence.influence`` returns (or ``influence.json`` read back):
+            its ``metrics``, ``summary`` ({metric: {label: {mean, ci95, seeds}}}) and selection.
+        example_worlds: a batched world pytree (leading axis k) of the influenced
+            distribution; the first ``min(k, 4)`` are drawn (None: no examples).
+        env_name: "racing" or "harvest".
+        out: the PNG path.
+
+    Returns:
+        ``out``.
+    """
+    summary, metrics = result.get("summary"), result.get("metrics")
+    if not summary or not metrics:
+        raise WorldagentError("the result has no summary; pass what influence() returned or influence.json.")
+    examples = _examples(example_worlds)
+    plt = _pyplot()
+    columns = len(metrics) + (2 if examples else 0)
+    figure = plt.figure(figsize=(2.1 * len(metrics) + (4.2 if examples else 0), 3.8), dpi=120)
+    grid = figure.add_gridspec(2, columns, wspace=0.55, hspace=0.1)
+    labels = [label for label in ("default", "influenced") if all(label in summary[m] for m in metrics)]
+    for i, metric in enumerate(metrics):
+        axis = figure.add_subplot(grid[:, i])
+        entries = [summary[metric][label] for label in labels]
+        axis.bar(range(len(labels)), [e["mean"] for e in entries], yerr=[_interval(e) for e in entries], capsize=4,
+                 color=[COLOURS[label] for label in labels])
+        axis.set_xticks(range(len(labels)), [label.capitalize() for label in labels], rotation=30, fontsize=8)
+        axis.set_title(metric_label(metric), fontsize=9)
+        means = [e["mean"] for e in entries]
+        if metric in UNIT_METRICS or all(m == 0 for m in means):
+            axis.set_ylim(0, 1)
+        elif all(m >= 0 for m in means):
+            axis.set_ylim(bottom=0)
+        axis.tick_params(axis="y", labelsize=7)
+    for j, world in enumerate(examples):
+        axis = figure.add_subplot(grid[j // 2, len(metrics) + j % 2])
+        axis.imshow(world_image(env_name, world), interpolation="nearest")
+        axis.set_axis_off()
+    seeds = max((e.get("seeds", 0) for m in metrics for e in summary[m].values()), default=0)
+    selection = result.get("selection", {}).get("describe", "")
+    figure.suptitle(
+        f"{env_name}: default vs influenced training "
+        + (f"(mean over {seeds} seeds, 95% CI)" if seeds > 1 else "(one seed: no CI)")
+        + (f"; new training worlds: {selection}" if selection else ""),
+        fontsize=9,
+    )
+    path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
+    plt.close(figure)
+    return path
+
+
+def _examples(worlds: Any) -> list:
+    """Up to ``MAX_EXAMPLES`` unbatched worlds of a batched world pytree (numpy leaves)."""
+    if worlds is None:
+        return []
+    leaves = jax.tree_util.tree_leaves(worlds)
+    if not leaves or np.ndim(leaves[0]) < 1:
+        raise WorldagentError("example_worlds must be a batch of worlds (leading axis), e.g. load_influenced_worlds(...)[0].")
+    count = min(int(np.shape(leaves[0])[0]), MAX_EXAMPLES)
+    return [jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[i]), worlds) for i in range(count)]

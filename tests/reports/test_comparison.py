@@ -14,6 +14,7 @@ from worldagent.reports.comparison import (
     comparison_figure,
     comparison_table_markdown,
     evaluations_to_reach,
+    tail_fraction,
     sample_efficiency,
 )
 
@@ -61,6 +62,11 @@ def test_table_and_csv_say_never_instead_of_a_number():
     assert "4;never" in csv and "not reached" in csv
 
 
+def test_tail_fraction_places_scores_in_the_random_tail():
+    np.testing.assert_allclose(tail_fraction(np.array([-1.0, 0.0, 9.0, 99.0]), RANDOM, maximize=False), [0.0, 0.01, 0.1, 1.0])
+    np.testing.assert_allclose(tail_fraction(np.array([100.0, 99.0, 90.0]), RANDOM, maximize=True), [0.0, 0.01, 0.1])
+
+
 def test_bad_input_is_refused():
     with pytest.raises(WorldagentError, match="no finite value"):
         sample_efficiency(RUNS, np.array([np.nan]))
@@ -72,6 +78,9 @@ def test_bad_input_is_refused():
 
 def test_the_figure_is_a_png(tmp_path):
     out = comparison_figure(RUNS, RANDOM, "return", tmp_path / "fig" / "comparison.png")
+    assert out.stat().st_size > 10_000
+    outliers = {"a": [np.array([-300.0, *np.linspace(40, 60, 30)])]}  # a far outlier is noted, not squashing the bulk
+    out = comparison_figure(outliers, np.linspace(40, 60, 200), "return", tmp_path / "outliers.png", maximize=True)
     assert out.stat().st_size > 10_000
     with Image.open(out) as image:
         assert image.format == "PNG" and image.size[0] > image.size[1] > 300

@@ -162,13 +162,103 @@ def write_comparison(rows: list[dict], out_dir: Path | str, metric: str = "score
     )
 
 
-def comparison_figure(runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, out: Path | str, maximize: bool = False, bins: int = 30) -> Path:
+def tail_fraction(values: np.ndarray, random_scores: np.ndarray, maximize: bool) -> np.ndarray:
+    """Share of random worlds scoring at or beyond each value: where it sits in the random tail.
+
+    0.01 means only 1% of random worlds are as extreme; 0 means none is (beyond every random world).
+    """
+    ordered = np.sort(np.asarray(random_scores, np.float64))
+    values = np.asarray(values, np.float64)
+    if maximize:
+        return (len(ordered) - np.searchsorted(ordered, values, side="left")) / len(ordered)
+    return np.searchsorted(ordered, values, side="right") / len(ordered)
+
+
+def _histogram_range(samples: list[np.ndarray]) -> tuple[float, float]:
+    """The x-range of the distribution panel: everything, unless a few far outliers would squash
+    the bulk into a couple of bins; then the central range (outliers are counted in a note)."""
+    everything = np.concatenate(samples)
+    low, high = everything.min(), everything.max()
+    bulk_low, bulk_high = np.quantile(everything, [0.01, 0.99])
+    if (bulk_high - bulk_low) >= 0.2 * (high - low):
+        return float(low), float(high)
+    pad = 0.25 * max(bulk_high - bulk_low, 1e-9)
+    return float(max(low, bulk_low - pad)), float(min(high, bulk_high + pad))
+
+
+def _distribution_panel(axis, pooled: dict[str, np.ndarray], random_scores: np.ndarray, metric: str, maximize: bool, colours, bins: int) -> None:
+    """Figure 7: scores of the worlds each optimiser sampled vs random worlds (density)."""
+    low, high = _histogram_range([random_scores, *pooled.values()])
+    edges = np.linspace(low, high, bins + 1)
+    outside = {"random worlds": random_scores, **pooled}
+    notes = []
+    for label, values in outside.items():
+        below, above = int(np.sum(values < low)), int(np.sum(values > high))
+        if below or above:
+            notes.append(f"{label}: {below} below {low:.3g}" + (f", {above} above {high:.3g}" if above else ""))
+    inside = lambda v: v[(v >= low) & (v <= high)]  # noqa: E731
+    axis.hist(inside(random_scores), bins=edges, weights=np.full(len(inside(random_scores)), 1 / len(random_scores)), color="0.55", alpha=0.6,
+              label=f"random worlds (n={len(random_scores)}, mean {random_scores.mean():.3g})")
+    for i, (name, values) in enumerate(pooled.items()):
+        axis.hist(inside(values), bins=edges, weights=np.full(len(inside(values)), 1 / len(values)), histtype="step", linewidth=2, color=colours(i),
+                  label=f"{name} (n={len(values)}, mean {values.mean():.3g})")
+    axis.set_xlim(low, high)
+    axis.set_xlabel(metric)
+    axis.set_ylabel("share of the worlds")
+    axis.set_title(f"worlds sampled while {'maximising' if maximize else 'minimising'} {metric}")
+    axis.legend(fontsize=8, loc="upper right" if not maximize else "upper left")
+    if notes:
+        axis.text(0.02 if not maximize else 0.98, 0.97, "beyond the axis:\n" + "\n".join(notes), transform=axis.transAxes, fontsize=7,
+                  va="top", ha="left" if not maximize else "right", bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "0.7"})
+
+
+def _best_so_far_panel(axis, runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, maximize: bool, colours) -> None:
+    """Best world so far vs evaluations, as its place in the random tail (log scale).
+
+    A tail share is the best-so-far score on the scale of the random distribution, which makes
+    one axis for outliers and the bulk; the right axis gives the score at each tick. The dotted
+    curve is random search's expectation, 1/(n+1) after n worlds.
+    """
+    count = len(random_scores)
+    floor = 0.5 / count  # "beyond every random world"
+    longest = 1
+    for i, (name, seeds) in enumerate(runs.items()):
+        length = min(len(s) for s in seeds)
+        longest = max(longest, length)
+        curves = np.stack([np.maximum(tail_fraction(best_so_far(s, maximize)[:length], random_scores, maximize), floor) for s in seeds])
+        x = np.arange(1, length + 1)
+        axis.step(x, np.median(curves, axis=0), where="post", color=colours(i), linewidth=2, label=f"{name} (median of {len(seeds)} seeds)")
+        axis.fill_between(x, curves.min(axis=0), curves.max(axis=0), step="post", color=colours(i), alpha=0.15, linewidth=0)
+    x = np.arange(1, longest + 1)
+    axis.plot(x, 1 / (x + 1), color="0.3", linestyle=":", linewidth=1.2, label="random search, expected 1/(n+1)")
+    axis.axhline(floor, color="0.5", linewidth=0.8)
+    axis.set_yscale("log")
+    axis.set_ylim(floor / 1.5, 1.05)
+    axis.set_xlabel("evaluated worlds")
+    axis.set_ylabel(f"share of random worlds {'≥' if maximize else '≤'} best so far")
+    axis.set_title(f"best world found vs evaluations (grey line: beyond all {count} random worlds)", fontsize=10)
+    ticks = [t for t in (0.5, 0.1, 0.01, 0.001) if t >= 1 / count]
+    axis.set_yticks(ticks)
+    axis.set_yticklabels([f"{t:g}" for t in ticks])
+    axis.minorticks_off()
+    scores = axis.twinx()
+    scores.set_yscale("log")
+    scores.set_ylim(axis.get_ylim())
+    scores.set_yticks(ticks)
+    scores.set_yticklabels([f"{np.quantile(random_scores, 1 - t if maximize else t):.4g}" for t in ticks])
+    scores.minorticks_off()
+    scores.set_ylabel(f"{metric} at that share of random worlds")
+    axis.legend(fontsize=8, loc="upper right")
+
+
+def comparison_figure(runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, out: Path | str, maximize: bool = False, bins: int = 40) -> Path:
     """Figure 7 and a best-so-far curve, side by side, to PNG.
 
     Left: the distribution of the scores of every world each optimiser sampled (all seeds
-    pooled) against the random distribution. Right: the best score found so far against the
-    number of evaluated worlds, median over seeds with the min–max band, and the random
-    distribution's mean and tail quantiles as reference lines.
+    pooled) against the random distribution, each as a share of its worlds (far outliers are
+    counted in a note rather than squashing the bulk). Right: the best world found so far
+    against the number of evaluated worlds, median over seeds with the min–max band, placed in
+    the random distribution's tail (see ``_best_so_far_panel``).
     """
     from worldagent.reports.figures import _pyplot
 
@@ -177,33 +267,10 @@ def comparison_figure(runs: dict[str, list[np.ndarray]], random_scores: np.ndarr
     plt = _pyplot()
     random_scores = _finite(random_scores, "random scores")
     colours = plt.get_cmap("tab10")
-    figure, (left, right) = plt.subplots(1, 2, figsize=(12, 4.4), dpi=120)
-
-    pooled = {name: np.concatenate([np.asarray(s, np.float64) for s in seeds]) for name, seeds in runs.items()}
-    everything = np.concatenate([random_scores, *[v[np.isfinite(v)] for v in pooled.values()]])
-    edges = np.histogram_bin_edges(everything, bins=bins)
-    left.hist(random_scores, bins=edges, density=True, color="0.55", alpha=0.6, label=f"random worlds (n={len(random_scores)}, mean {random_scores.mean():.3g})")
-    for i, (name, values) in enumerate(pooled.items()):
-        values = values[np.isfinite(values)]
-        left.hist(values, bins=edges, density=True, histtype="step", linewidth=2, color=colours(i), label=f"{name} (n={len(values)}, mean {values.mean():.3g})")
-    left.set_xlabel(metric)
-    left.set_ylabel("density of worlds")
-    left.set_title(f"worlds sampled while {'maximising' if maximize else 'minimising'} {metric}")
-    left.legend(fontsize=8)
-
-    for i, (name, seeds) in enumerate(runs.items()):
-        length = min(len(s) for s in seeds)
-        curves = np.stack([best_so_far(s, maximize)[:length] for s in seeds])
-        x = np.arange(1, length + 1)
-        right.plot(x, np.median(curves, axis=0), color=colours(i), linewidth=2, label=f"{name} (median of {len(seeds)} seeds)")
-        right.fill_between(x, curves.min(axis=0), curves.max(axis=0), color=colours(i), alpha=0.15, linewidth=0)
-    right.axhline(random_scores.mean(), color="0.3", linestyle="-", linewidth=1, label="random mean")
-    for q, value in thresholds(random_scores, (0.1, 0.01), maximize).items():
-        right.axhline(value, color="0.3", linestyle=":" if q < 0.05 else "--", linewidth=1, label=f"random {'top' if maximize else 'bottom'} {q:.0%}")
-    right.set_xlabel("evaluated worlds")
-    right.set_ylabel(f"best {metric} so far")
-    right.set_title("best world found vs evaluations")
-    right.legend(fontsize=8)
+    pooled = {name: _finite(np.concatenate([np.asarray(s, np.float64) for s in seeds]), f"{name}'s scores") for name, seeds in runs.items()}
+    figure, (left, right) = plt.subplots(1, 2, figsize=(13, 4.8), dpi=120)
+    _distribution_panel(left, pooled, random_scores, metric, maximize, colours, bins)
+    _best_so_far_panel(right, runs, random_scores, metric, maximize, colours)
     figure.tight_layout()
     path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png"))
     plt.close(figure)

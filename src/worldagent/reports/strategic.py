@@ -172,23 +172,61 @@ def _normalised_note(env_name: str, metric: str, evaluation: Evaluation) -> str:
 
 
 def _distribution_panel(axis, random_scores: np.ndarray, low: Evaluation, high: Evaluation, metric: str) -> None:
-    """Histogram of random-world scores with the two optimised scores and the random mean."""
+    """Histogram of random-world scores with the two optimised scores and the random mean.
+
+    When the random worlds crowd into a small part of the axis (racing: nearly every world is
+    lapped, a few crash 300 below), the counts go on a log scale and an inset zooms on the crowd.
+    """
     scores = np.asarray(random_scores, np.float64)
     scores = scores[np.isfinite(scores)]
-    axis.hist(scores, bins=30, color="0.6", alpha=0.8, label=f"random worlds (n={len(scores)})")
     mean = scores.mean()
-    below = np.mean(scores <= low.score)
-    above = np.mean(scores >= high.score)
-    axis.axvline(mean, color="black", linestyle="--", linewidth=1.5, label=f"random mean {mean:.4g}")
-    axis.axvline(low.score, color=(0.85, 0.1, 0.1), linewidth=2.5, label=f"min world {low.score:.4g} ({below:.1%} of random ≤)")
-    axis.axvline(high.score, color=(0.1, 0.35, 0.9), linewidth=2.5, label=f"max world {high.score:.4g} ({above:.1%} of random ≥)")
     low_edge, high_edge = min(scores.min(), low.score), max(scores.max(), high.score)
     margin = 0.05 * max(high_edge - low_edge, 1e-9)
-    axis.set_xlim(low_edge - margin, high_edge + margin)
+    bins = np.linspace(low_edge - margin, high_edge + margin, 61)
+    axis.hist(scores, bins=bins, color="0.6", alpha=0.8, label=f"random worlds (n={len(scores)})")
+    marks = _score_marks(scores, low, high, mean)
+    for value, style in marks:
+        axis.axvline(value, **style)
+    axis.set_xlim(bins[0], bins[-1])
     axis.set_xlabel(metric)
     axis.set_ylabel("random worlds")
     axis.set_title(f"{metric} of the optimised worlds vs random worlds", fontsize=9)
     axis.legend(fontsize=7, loc="upper left")
+    bulk = np.quantile(scores, [0.05, 0.95])
+    if bulk[1] - bulk[0] < 0.2 * (bins[-1] - bins[0]):
+        axis.set_yscale("log")
+        axis.set_ylabel("random worlds (log scale)")
+        _zoom_inset(axis, scores, bulk, marks)
+
+
+def _score_marks(scores: np.ndarray, low: Evaluation, high: Evaluation, mean: float) -> list[tuple[float, dict]]:
+    """Vertical lines: the random mean and the two optimised scores, labelled with their rank."""
+    below, above = np.mean(scores <= low.score), np.mean(scores >= high.score)
+    return [
+        (mean, {"color": "black", "linestyle": "--", "linewidth": 1.5, "label": f"random mean {mean:.4g}"}),
+        (low.score, {"color": (0.85, 0.1, 0.1), "linewidth": 2.5, "label": f"min world {low.score:.4g} ({below:.1%} of random ≤)"}),
+        (high.score, {"color": (0.1, 0.35, 0.9), "linewidth": 2.5, "label": f"max world {high.score:.4g} ({above:.1%} of random ≥)"}),
+    ]
+
+
+def _zoom_inset(axis, scores: np.ndarray, bulk: np.ndarray, marks) -> None:
+    """An inset histogram of the central random worlds, with the marks that fall inside it."""
+    width = max(bulk[1] - bulk[0], 1e-9)
+    lo, hi = bulk[0] - 0.5 * width, bulk[1] + 0.5 * width
+    for value, _ in marks[1:]:  # widen to include an optimised score just outside the crowd
+        if lo - width < value < lo:
+            lo = value - 0.05 * width
+        if hi < value < hi + width:
+            hi = value + 0.05 * width
+    inset = axis.inset_axes([0.27, 0.12, 0.48, 0.5])  # over the empty middle between the tails
+    inside = scores[(scores >= lo) & (scores <= hi)]
+    inset.hist(inside, bins=30, range=(lo, hi), color="0.6", alpha=0.8)
+    for value, style in marks:
+        if lo <= value <= hi:
+            inset.axvline(value, **{k: v for k, v in style.items() if k != "label"})
+    inset.set_xlim(lo, hi)
+    inset.set_title(f"zoom: {len(inside)} of {len(scores)} random worlds", fontsize=7)
+    inset.tick_params(labelsize=6)
 
 
 def strategic_figure(env_name: str, env, policy, params, low: Evaluation, high: Evaluation, random_scores, metric: str, out: Path | str, key: Any = None) -> Path:

@@ -1,0 +1,52 @@
+"""``worldagent reproduce`` (the paper end to end) and ``worldagent report`` (its HTML report)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from worldagent.commands.common import console, friendly_errors
+
+
+def status_line(text: str) -> None:
+    """One status line per phase, printed as is (no rich markup: configs hold brackets)."""
+    console.print(text, markup=False, highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``reproduce`` and ``report`` to the CLI."""
+
+    @app.command()
+    @friendly_errors
+    def reproduce(
+        preset: str = typer.Option("quick", "--preset", help="quick (about 15 min on 2 CPU cores), paper (the paper's budgets; a GPU) or tiny (CI)."),
+        env: str = typer.Option("all", "--env", help="racing, harvest or all."),
+        out: Path = typer.Option(None, "--out", help="Run directory (default runs/PRESET); a rerun skips finished phases, a killed run resumes."),
+        algo: str = typer.Option(None, "--algo", help="Racing agents: acktr (the paper's, the default) or ppo."),
+        restart: list[str] = typer.Option([], "--restart", help="Redo this phase (and what depends on it): dataset, generator, agent, random, strategic, compare, influence. Repeatable."),
+        show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
+    ) -> None:
+        """Run the paper end to end: datasets, generators, agents, random and strategic evaluation, ES vs BO, influencing; then the HTML report."""
+        from worldagent.reproduce.pipeline import reproduce as run, resolve_envs
+        from worldagent.reproduce.presets import get_preset
+
+        chosen = get_preset(preset).with_algo(algo)
+        if show:
+            typer.echo(chosen.show())
+            return
+        out = out or Path("runs") / chosen.name
+        manifest = run(chosen, out, resolve_envs(env), restart=restart, progress=not quiet, echo=status_line)
+        failed = [key for key, entry in manifest.data["phases"].items() if entry.get("status") == "failed"]
+        if failed:
+            console.print(f"[yellow]finished with failed phase(s): {', '.join(failed)} (see the report)[/yellow]")
+        console.print(f"report: {out / 'report.html'}")
+
+    @app.command()
+    @friendly_errors
+    def report(run_dir: Path = typer.Argument(..., help="A `worldagent reproduce` run directory.")) -> None:
+        """Rebuild RUN_DIR/report.html from the run's manifest, stores and phase outputs."""
+        from worldagent.reports.html import build_report
+
+        console.print(f"wrote {build_report(run_dir)}")

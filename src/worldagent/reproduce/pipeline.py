@@ -1,0 +1,170 @@
+"""``reproduce``: the paper end to end, phase by phase, cached in a run directory.
+
+For each environment the phases of ``phases.PHASE_FUNCTIONS`` run in order (dataset →
+generator → agent → random evaluation → strategic min/max → optimiser comparison →
+influencing), then the HTML report is built. The manifest (``manifest.py``) records each
+phase; a phase already done with the same config is skipped, an unfinished one runs again and
+resumes from its own checkpoint or store, and one done with another config is refused until
+``restart`` names it (which also restarts every phase computed from it).
+
+The influencing phase is the last and the most likely to find nothing (no world may have the
+selected property at a small budget): its failure is recorded in the manifest and the report as
+that phase's result, and the run carries on to the report instead of crashing.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+import time
+from pathlib import Path
+from typing import Callable, Iterable
+
+from worldagent.errors import WorldagentError
+from worldagent.reproduce.manifest import Manifest, phase_key
+from worldagent.reproduce.phases import PHASE_FUNCTIONS, EnvContext, dependents
+from worldagent.reproduce.presets import ENVS, PHASES, Preset
+
+TOLERATED = ("influence",)  # phases whose failure is a result, not the end of the run
+
+
+def resolve_envs(env: str) -> list[str]:
+    """``"all"`` → both environments; otherwise the one named."""
+    if env == "all":
+        return list(ENVS)
+    if env not in ENVS:
+        raise WorldagentError(f"unknown environment {env!r}; use racing, harvest or all.")
+    return [env]
+
+
+def restart_closure(phases: Iterable[str]) -> list[str]:
+    """The phases to redo for ``--restart`` of ``phases`` (with all that depends on them)."""
+    found = {name for phase in phases for name in dependents(phase)}
+    return [name for name in PHASES if name in found]
+
+
+def reproduce(preset: Preset, out: Path | str, envs: list[str], restart: Iterable[str] = (), progress: bool = True,
+              echo: Callable[[str], None] = print) -> Manifest:
+    """Run (or resume) the pipeline for ``envs`` in run directory ``out`` and build its report.
+
+    Args:
+        preset: budgets and seeds (``presets.PRESETS``).
+        out: the run directory (created).
+        envs: environments, from ``resolve_envs``.
+        restart: phases to redo from scratch, with everything computed from them.
+        progress: show progress bars.
+        echo: where the one status line per phase goes.
+
+    Returns:
+        The manifest as it stands at the end.
+    """
+    out = Path(out)
+    manifest = Manifest.open(out)
+    redo = restart_closure(restart)
+    for env in envs:
+        forget_phases(manifest, EnvContext(out, env, preset), redo)
+    check_configs(manifest, preset, envs)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest.begin_run(preset.name, preset.to_dict(), envs)
+    for env in envs:
+        ctx = EnvContext(out, env, preset, progress)
+        for phase in PHASES:
+            run_phase(manifest, phase_key(env, phase), preset.phase_config(env, phase), lambda p=phase: PHASE_FUNCTIONS[p](ctx), echo,
+                      tolerate=phase in TOLERATED)
+    from worldagent.reports.html import build_report
+
+    run_phase(manifest, "report", {"preset": preset.name}, lambda: report_outputs(build_report(out), out), echo, skip=False)
+    return manifest
+
+
+def report_outputs(path: Path, out: Path) -> dict:
+    """The report phase's record: where the report is and how big."""
+    return {"report": str(path.relative_to(out)), "summary": f"{path} ({path.stat().st_size / 1e6:.1f} MB)"}
+
+
+def check_configs(manifest: Manifest, preset: Preset, envs: list[str]) -> None:
+    """Refuse, before any work, a phase recorded with a config other than the preset's."""
+    for env in envs:
+        for phase in PHASES:
+            manifest.check_config(phase_key(env, phase), preset.phase_config(env, phase))
+
+
+def run_phase(manifest: Manifest, key: str, config: dict, work: Callable[[], dict], echo: Callable[[str], None],
+              tolerate: bool = False, skip: bool = True) -> dict:
+    """Run one phase unless it is done with ``config``; record it; print one status line."""
+    if skip and manifest.is_done(key, config):
+        echo(f"{key}: done already, skipped ({manifest.phase(key).get('wall_s', 0):.1f} s when it ran)")
+        return manifest.phase(key)
+    manifest.start(key, config)
+    echo(f"{key}: running")
+    start = time.perf_counter()
+    try:
+        outputs = work()
+    except WorldagentError as error:
+        entry = manifest.fail(key, error)
+        if not tolerate:
+            raise
+        echo(f"{key}: failed after {time.perf_counter() - start:.1f} s, recorded as the phase's result: {error}")
+        return entry
+    except BaseException as error:  # KeyboardInterrupt too: the manifest says where the run stopped
+        manifest.fail(key, error)
+        raise
+    entry = manifest.finish(key, outputs)
+    echo(f"{key}: done in {entry['wall_s']:.1f} s - {outputs.get('summary', '')}")
+    return entry
+
+
+def forget_phases(manifest: Manifest, ctx: EnvContext, phases: list[str]) -> None:
+    """Remove the outputs of ``phases`` of one environment and drop them from the manifest."""
+    if not phases:
+        return
+    outputs = {
+        "dataset": [ctx.dataset_path],
+        "generator": [ctx.generator_dir, ctx.figures / "generator_traversals.png"],
+        "agent": [ctx.agent_dir],
+        "strategic": [ctx.figures / "strategic.png"],
+        "compare": [ctx.figures / "comparison.png"],
+        "influence": [ctx.dir / "influence", ctx.figures / "influence.png"],
+    }
+    for phase in phases:
+        for path in outputs.get(phase, []):
+            remove(path)
+    if "random" in phases:
+        for suffix in ("", "-wal", "-shm"):
+            remove(Path(f"{ctx.store_path}{suffix}"))
+    else:
+        drop_campaigns(ctx.store_path, store_campaigns(ctx, phases))
+    manifest.forget([phase_key(ctx.env, phase) for phase in phases])
+
+
+def store_campaigns(ctx: EnvContext, phases: list[str]) -> list[str]:
+    """Names of the store campaigns written by ``phases``."""
+    from worldagent.reproduce.phases import campaign_names, compare_names
+
+    names = campaign_names(ctx.env, ctx.seed)
+    found = [names["min"], names["max"]] if "strategic" in phases else []
+    if "compare" in phases:
+        found += [n for group in compare_names(ctx.env, ctx.budgets.compare_seeds).values() for n in group]
+    return found
+
+
+def drop_campaigns(store_path: Path, names: list[str]) -> None:
+    """Delete campaigns and their evaluations from a run store (a restarted phase starts clean)."""
+    if not names or not store_path.exists():
+        return
+    db = sqlite3.connect(store_path, timeout=30.0)
+    try:
+        with db:
+            marks = ",".join("?" * len(names))
+            db.execute(f"DELETE FROM evaluations WHERE campaign_id IN (SELECT id FROM campaigns WHERE name IN ({marks}))", names)
+            db.execute(f"DELETE FROM campaigns WHERE name IN ({marks})", names)
+    finally:
+        db.close()
+
+
+def remove(path: Path) -> None:
+    """Delete a file or directory tree if it exists."""
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()

@@ -1,0 +1,119 @@
+"""The HTML report: every section, self-contained, and its numbers equal the run store's."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from worldagent.cli import app
+from worldagent.errors import WorldagentError
+from worldagent.reports.html import SECTIONS, build_report
+from worldagent.reproduce.manifest import Manifest
+from worldagent.store import RunStore
+
+
+def data_values(page: str) -> dict[str, float]:
+    """{data-key: value} of every machine-readable number; a key printed twice must agree."""
+    found: dict[str, float] = {}
+    for key, value in re.findall(r'data-key="([^"]+)" data-value="([^"]+)"', page):
+        number = float(value)
+        if key in found:
+            assert np.isclose(found[key], number, equal_nan=True), key
+        found[key] = number
+    return found
+
+
+def episode_mean(evaluation, metric: str) -> float:
+    return float(np.mean([float(e[metric]) for e in evaluation.episodes]))
+
+
+def expected_racing(out) -> dict[str, float]:
+    """The racing headline numbers, recomputed here straight from the store and influence.json."""
+    with RunStore(out / "racing" / "store.sqlite", create=False) as store:
+        random = store.evaluations("random-return-s0")
+        low = min(store.evaluations("cmaes-min-return-s0"), key=lambda e: e.score)
+        high = max(store.evaluations("cmaes-max-return-s0"), key=lambda e: e.score)
+    values = {
+        "racing.random.mean_raw": np.mean([e.score for e in random]),
+        "racing.random.mean_normalised": np.mean([episode_mean(e, "normalised_return") for e in random]),
+        "racing.random.crash_rate": np.mean([episode_mean(e, "crashed") for e in random]),
+    }
+    for label, found in (("min", low), ("max", high)):
+        values.update({f"racing.{label}.raw": found.score, f"racing.{label}.normalised": episode_mean(found, "normalised_return"),
+                       f"racing.{label}.crash_rate": episode_mean(found, "crashed")})
+    summary = json.loads((out / "racing" / "influence" / "influence.json").read_text())["summary"]
+    for which in ("default", "influenced"):
+        values[f"racing.influence.crashed_{which}"] = summary["crashed"][which]["mean"]
+    before, after = summary["normalised_return"]["default"]["mean"], summary["normalised_return"]["influenced"]["mean"]
+    values["racing.influence.reward_change_pct"] = 100 * (after - before) / abs(before)
+    return values
+
+
+def test_the_report_is_one_self_contained_file_with_every_section(racing_run):
+    out, _ = racing_run
+    page = (out / "report.html").read_text()
+    for anchor, title in SECTIONS:
+        assert f'<section id="{anchor}">' in page and f"<h2>{title}</h2>" in page.replace("&#x27;", "'")
+    images = re.findall(r'<img [^>]*src="([^"]+)"', page)
+    assert len(images) >= 6 and all(src.startswith("data:image/png;base64,") for src in images)
+    assert not re.search(r'(src|href)="(?!data:|#)', page)  # nothing to fetch: it opens offline
+    assert "<table>" in page and "worlds to reach random q0.1" in page
+    for number in ("0.87", "0.13", "0.99", "0.61", "0.05", "0.92", "0.11", "0.04", "0.51", "0.33", "0.78", "-5"):
+        assert f"<td class='num'>{number}</td>" in page, number  # the paper's values, beside ours
+
+
+def test_the_reports_numbers_equal_the_stores(racing_run):
+    out, _ = racing_run
+    shown = data_values((out / "report.html").read_text())
+    for key, value in expected_racing(out).items():
+        assert np.isclose(shown[key], value, rtol=1e-12, atol=1e-12, equal_nan=True), key
+    assert np.isnan(shown["harvest.random.mean_normalised"])  # harvest was not run: n/a, not a crash
+
+
+def test_the_report_shows_its_sample_efficiency_table_from_the_store(racing_run):
+    from worldagent.reports.comparison import sample_efficiency
+
+    out, _ = racing_run
+    shown = data_values((out / "report.html").read_text())
+    with RunStore(out / "racing" / "store.sqlite", create=False) as store:
+        runs = {opt: [np.array([e.score for e in store.evaluations(f"compare-{opt}-min-return-s0")][:21])] for opt in ("cmaes", "bo", "random")}
+        random = np.array([e.score for e in store.evaluations("random-return-s0")])
+    for row in sample_efficiency(runs, random):
+        assert np.isclose(shown[f"racing.compare.{row['optimiser']}.best_mean"], row["best_mean"])
+        assert np.isclose(shown[f"racing.compare.{row['optimiser']}.mean_sampled"], row["mean_sampled"])
+
+
+def test_report_command_rebuilds_the_report(racing_copy):
+    (racing_copy / "report.html").unlink()
+    result = CliRunner().invoke(app, ["report", str(racing_copy)])
+    assert result.exit_code == 0, result.output
+    assert (racing_copy / "report.html").is_file()
+
+
+def test_missing_phases_show_as_not_run(tmp_path):
+    manifest = Manifest.open(tmp_path)
+    manifest.data.update(preset="tiny", envs=["racing", "harvest"], config={}, versions={}, device="cpu")
+    manifest.start("racing/dataset", {"seed": 0})
+    manifest.finish("racing/dataset", {"summary": "256 worlds"})
+    page = build_report(tmp_path).read_text()
+    for anchor, _ in SECTIONS:
+        assert f'<section id="{anchor}">' in page
+    assert page.count("not run") >= 10
+
+
+def test_a_directory_without_a_run_is_refused(tmp_path):
+    with pytest.raises(WorldagentError, match="has no manifest.json; run `worldagent reproduce"):
+        build_report(tmp_path)
+    result = CliRunner().invoke(app, ["report", str(tmp_path)])
+    assert result.exit_code == 2 and "no manifest.json" in result.output
+
+
+def test_reproduce_command_shows_presets_and_refuses_changes_in_one_line(racing_copy):
+    shown = CliRunner().invoke(app, ["reproduce", "--preset", "quick", "--show"])
+    assert shown.exit_code == 0 and json.loads(shown.output)["name"] == "quick"
+    changed = CliRunner().invoke(app, ["reproduce", "--preset", "tiny", "--env", "racing", "--algo", "ppo", "--out", str(racing_copy), "--quiet"])
+    assert changed.exit_code == 2 and "--restart agent" in changed.output and "Traceback" not in changed.output

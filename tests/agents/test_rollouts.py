@@ -39,7 +39,7 @@ def test_collect_shapes_worlds_and_episodes(racing_env, racing_pool):
     assert len(np.unique(starts.round(5), axis=0)) > 1  # envs start on different worlds
     step = jax.jit(lambda k, r: collect(k, r, net.apply, net_params, racing_env, params, racing_pool, 40))
     runner, traj, (last_value, _) = step(jax.random.key(2), runner)
-    assert traj.obs.shape == (40, 16, 260) and traj.action.shape == (40, 16) and last_value.shape == (16,)
+    assert traj.obs.shape == (40, 16, *racing_env.observation_shape) and traj.action.shape == (40, 16) and last_value.shape == (16,)
     summary = episode_summary(traj)
     assert int(summary["episodes"]) == int(traj.done.sum()) > 0  # a random policy crashes quickly
     ended = np.asarray(traj.done)

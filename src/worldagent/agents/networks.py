@@ -1,17 +1,16 @@
 """Networks of the agents (Flax linen, pure ``init``/``apply``), and how to rebuild them from a config.
 
 ``ActorCritic`` is the racing agent of PPO and ACKTR: two separate MLP torsos (actor, critic)
-on the flat observation f32[260] (16×16 road window, position, velocity / top speed).
+on the flat observation (position, velocity / top speed, route ahead; see ``envs/racing/env.py``).
 
 Sizes and why: two hidden layers of 128 units, tanh. The paper's agent (pytorch-a2c-ppo-acktr's
 ACKTR with defaults, §5.3) uses an MLP of two 64-unit tanh layers for flat observations; the
-256 road pixels here are a larger input than that default was tuned for, so the torsos are
-twice as wide. Separate torsos keep value-loss gradients (returns span −360..100) out of the
-policy. Orthogonal initialisation as in PPO's reference implementations: gain √2 in hidden
-layers, 0.01 for the policy head (near-uniform initial policy), 1 for the value head.
-``window > 0`` puts a small CNN (``WindowEncoder``) on the road window first; it was tried and
-is ~5× slower per step on CPU without learning to drive within the budget either (see
-``ppo.py``), so the default is the MLP.
+torsos here are twice as wide (chosen when the observation held 256 road pixels; kept, as the
+agents reach the targets with it). Separate torsos keep value-loss gradients (returns span
+−360..100) out of the policy. Orthogonal initialisation as in PPO's reference implementations:
+gain √2 in hidden layers, 0.01 for the policy head (near-uniform initial policy), 1 for the
+value head. (A small CNN on the road window was tried: ~5× slower per step on CPU and it did
+not learn to drive within the budget either.)
 
 ``build_network(kind, config)`` rebuilds a module from its saved config (``policy.py``), so a
 saved agent names its architecture instead of pickling it.
@@ -48,23 +47,6 @@ class MLP(nn.Module):
         return nn.Dense(self.out, kernel_init=nn.initializers.orthogonal(self.head_scale), bias_init=nn.initializers.zeros)(x)
 
 
-class WindowEncoder(nn.Module):
-    """Racing's flat observation [..., W·W + 4] -> features: two strided 3×3 convs on the W×W road
-    window (16 and 32 channels, relu), flattened, concatenated with the 4 position/velocity values."""
-
-    window: int = 16
-
-    @nn.compact
-    def __call__(self, obs: jax.Array) -> jax.Array:
-        cells = self.window * self.window
-        batch = obs.shape[:-1]
-        image = obs[..., :cells].reshape(-1, self.window, self.window, 1)
-        for channels in (16, 32):
-            image = nn.relu(nn.Conv(channels, (3, 3), strides=(2, 2), kernel_init=nn.initializers.orthogonal(np.sqrt(2.0)))(image))
-        features = image.reshape(*batch, -1)
-        return jnp.concatenate([features, obs[..., cells:]], axis=-1)
-
-
 class ActorCritic(nn.Module):
     """Categorical policy logits and a state value from a flat observation.
 
@@ -72,25 +54,16 @@ class ActorCritic(nn.Module):
         num_actions: A, the number of discrete actions.
         hidden: widths of the hidden layers of each torso.
         activation: "tanh" or "relu".
-        window: 0: the torsos read the flat observation; W > 0: each torso first encodes the
-            W×W road window of racing's observation with a small CNN (``WindowEncoder``).
     """
 
     num_actions: int
     hidden: Sequence[int] = (128, 128)
     activation: str = "tanh"
-    window: int = 0
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
         """obs [..., D] (any dtype; cast to f32) -> (logits f32[..., A], value f32[...])."""
         x = obs.astype(jnp.float32)
-        if self.window:
-            x_actor = WindowEncoder(self.window, name="actor_encoder")(x)
-            x_critic = WindowEncoder(self.window, name="critic_encoder")(x)
-            logits = MLP(tuple(self.hidden), self.num_actions, 0.01, self.activation, name="actor")(x_actor)
-            value = MLP(tuple(self.hidden), 1, 1.0, self.activation, name="critic")(x_critic)
-            return logits, value[..., 0]
         logits = MLP(tuple(self.hidden), self.num_actions, 0.01, self.activation, name="actor")(x)
         value = MLP(tuple(self.hidden), 1, 1.0, self.activation, name="critic")(x)
         return logits, value[..., 0]

@@ -166,7 +166,8 @@ def train_racing(
             ``curve.png`` and, at the end, the agent in ``policy/``.
         algo: a name in ``ALGORITHMS`` ("ppo").
         seed: the run's seed (becomes the PRNG key here).
-        env, env_params: default ``ParticleRacing()`` and its default params.
+        env, env_params: default ``ParticleRacing()`` and its default params (the config's
+            ``respawn`` sets respawn-on-crash for training, see ``ppo.training_params``).
         progress: show a progress bar (episodes).
         resume: continue from ``out_dir``'s checkpoint if there is one (it must be the same
             algorithm, config and seed); otherwise start afresh (overwriting it).

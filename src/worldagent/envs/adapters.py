@@ -17,29 +17,33 @@ import numpy as np
 from gymnasium import spaces
 
 from worldagent.envs.core import check_actions
-from worldagent.envs.racing.env import ParticleRacing, RacingParams
+from worldagent.envs.racing.env import ROUTE_SCALE, ParticleRacing, RacingParams
 from worldagent.envs.racing.world import Track
 
+ROUTE_REACH = 2.0  # normalised units: a bound on how far ahead a route point can be, with margin
+
+
 class ParticleRacingGym(gymnasium.Env):
-    """Particle Racing as a Gymnasium env: ``Box(W·W + 4)`` observations, ``Discrete(4)`` actions.
+    """Particle Racing as a Gymnasium env: ``Box(W·W + 4 + 2·R)`` observations, ``Discrete(4)`` actions.
 
     Args:
         render_mode: ``None`` or ``"rgb_array"`` (a 256×256 picture of the track and agent).
         params: the env's ``RacingParams`` (defaults: the paper's rewards and 300-step limit).
-        window: side of the observation window (see ``ParticleRacing``).
+        window: side of the observation's road window, 0 for none (see ``ParticleRacing``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
 
-    def __init__(self, render_mode: str | None = None, params: RacingParams | None = None, window: int = 16):
+    def __init__(self, render_mode: str | None = None, params: RacingParams | None = None, window: int = 0):
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; use None or 'rgb_array'.")
         self.render_mode = render_mode
         self.env = ParticleRacing(window=window)
         self.params = params or self.env.default_params
-        cells = window * window
-        low = np.concatenate([np.zeros(cells), [-1.5, -1.5, -1.0, -1.0]]).astype(np.float32)
-        high = np.concatenate([np.ones(cells), [1.5, 1.5, 1.0, 1.0]]).astype(np.float32)
+        cells, route = window * window, 2 * len(self.env.route)
+        reach = ROUTE_REACH / ROUTE_SCALE  # route points are at most ~0.5 units away
+        low = np.concatenate([np.zeros(cells), [-1.5, -1.5, -1.0, -1.0], np.full(route, -reach)]).astype(np.float32)
+        high = np.concatenate([np.ones(cells), [1.5, 1.5, 1.0, 1.0], np.full(route, reach)]).astype(np.float32)
         self.observation_space = spaces.Box(low=low, high=high, dtype=np.float32)
         self.action_space = spaces.Discrete(self.env.num_actions)
         self._reset = jax.jit(self.env.reset)

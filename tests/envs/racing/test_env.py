@@ -9,7 +9,7 @@ import pytest
 
 from worldagent.envs.core import rollout, step_autoreset
 from worldagent.envs.racing.driver import driver_policy
-from worldagent.envs.racing.env import ParticleRacing, RacingParams, episode_metrics, locate, split_observation, wrap_half
+from worldagent.envs.racing.env import ROUTE_SCALE, ParticleRacing, RacingParams, episode_metrics, locate, split_observation, wrap_half
 from worldagent.envs.racing.tracks import rasterize
 from worldagent.envs.racing.world import HALF_WIDTH, RASTER_SIZE, ROAD_SIZE, Track, pack_road, to_pixel, unpack_road
 from worldagent.errors import WorldagentError
@@ -142,14 +142,46 @@ def test_local_segment_search_agrees_with_the_whole_loop(tracks):
         np.testing.assert_allclose(local, exact, atol=1e-5)
 
 
+WINDOWED = ParticleRacing(window=16)
+
+
 def test_observation_window_shows_the_road_around_the_agent(track):
-    obs, state = ENV.reset(KEY, track, PARAMS)
-    window, position, velocity = split_observation(np.asarray(obs), ENV.window)
-    assert window.shape == (ENV.window, ENV.window)
-    assert window[ENV.window // 2 - 1 : ENV.window // 2 + 1, ENV.window // 2 - 1 : ENV.window // 2 + 1].any()
+    obs, state = WINDOWED.reset(KEY, track, PARAMS)
+    assert obs.shape == WINDOWED.observation_shape == (16 * 16 + 4 + 2 * len(WINDOWED.route),)
+    window, position, velocity, _ = split_observation(np.asarray(obs), WINDOWED.window)
+    assert window.shape == (16, 16)
+    assert window[7:9, 7:9].any()
     assert 0 < window.mean() < 1  # both road and grass in view
     np.testing.assert_allclose(position, track.centreline[0])
     np.testing.assert_array_equal(velocity, 0.0)
+
+
+def test_route_sensor_shows_the_centreline_ahead_relative_to_the_agent(track):
+    obs, state = ENV.reset(KEY, track, PARAMS)
+    assert obs.shape == ENV.observation_shape == (4 + 2 * len(ENV.route),)
+    _, position, _, route = split_observation(np.asarray(obs), ENV.window)
+    expected = (np.asarray(track.centreline)[list(ENV.route)] - position) / ROUTE_SCALE
+    np.testing.assert_allclose(route, expected, rtol=1e-5, atol=1e-6)
+    middle = (np.asarray(track.centreline[10]) + np.asarray(track.centreline[11])) / 2  # on segment 10
+    _, moved = ENV.place(state, middle, [0.0, 0.0], PARAMS)  # the route moves with the agent
+    route_later = split_observation(np.asarray(ENV.observe(moved, PARAMS)), 0)[3]
+    np.testing.assert_allclose(route_later[0] * ROUTE_SCALE, track.centreline[10 + ENV.route[0]] - middle, atol=1e-6)
+
+
+def test_respawn_puts_a_crashed_agent_back_on_the_track_and_carries_on(oval):
+    respawning = PARAMS.replace(respawn=True)
+    _, state = ENV.reset(KEY, oval, respawning)
+    state = arrive_at(ENV, state, (0.6 + HALF_WIDTH + 1e-2, 0.0))
+    progress_before = float(state.progress)
+    _, after, reward, terminated, truncated, info = step(KEY, state, EAST, respawning)
+    assert bool(info["crashed"]) and float(reward) < -290  # the paper's penalty is still paid
+    assert not bool(terminated) and not bool(truncated) and not bool(after.done)
+    assert bool(after.crashed)  # recorded for the episode's crash rate
+    np.testing.assert_allclose(after.position, oval.centreline[int(after.segment)])
+    np.testing.assert_array_equal(after.velocity, 0.0)
+    assert abs(float(after.progress) - progress_before) < 2.0 / oval.centreline.shape[0]  # no progress from respawning
+    _, crashed, _, ended, _, _ = step(KEY, state, EAST, PARAMS)  # without respawn the same crash ends it
+    assert bool(ended) and bool(crashed.done)
 
 
 def test_autoreset_restarts_on_the_same_world_after_a_crash(oval):
@@ -183,6 +215,8 @@ def test_bad_inputs_get_one_line_errors(track, oval):
             ENV.step(KEY, state, action, PARAMS)
     with pytest.raises(WorldagentError, match="window"):
         ParticleRacing(window=64)
+    with pytest.raises(WorldagentError, match="route"):
+        ParticleRacing(route=(0, 3))
     for message in ("centreline has shape", "valid action"):  # one line each, naming the fix
         try:
             ENV.reset(KEY, bad_shape, PARAMS) if "shape" in message else ENV.step(KEY, state, 9, PARAMS)
@@ -194,13 +228,14 @@ def test_observation_window_is_the_unpacked_road_around_the_agent(tracks):
     """The bit-packed window equals a plain slice of the unpacked mask, at every column phase."""
     world = jax.tree_util.tree_map(lambda x: x[2], tracks)
     road = unpack_road(world.road)
-    _, state = ENV.reset(KEY, world, PARAMS)
-    observe = jax.jit(ENV.observe)
+    _, state = WINDOWED.reset(KEY, world, PARAMS)
+    observe = jax.jit(WINDOWED.observe)
+    size = WINDOWED.window
     for position in np.asarray(world.centreline[::7]):
         obs = observe(state.replace(position=jnp.asarray(position)), PARAMS)
-        window = split_observation(np.asarray(obs), ENV.window)[0]
-        row, col = np.round(to_pixel(position, ROAD_SIZE)).astype(int) - ENV.window // 2
-        np.testing.assert_array_equal(window, road[row : row + ENV.window, col : col + ENV.window])
+        window = split_observation(np.asarray(obs), size)[0]
+        row, col = np.round(to_pixel(position, ROAD_SIZE)).astype(int) - size // 2
+        np.testing.assert_array_equal(window, road[row : row + size, col : col + size])
 
 
 def test_pack_road_round_trips(track):

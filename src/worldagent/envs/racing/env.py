@@ -13,9 +13,20 @@ instead of O(K), and a jump across the grass onto another part of the track is n
 road" (no shortcuts). The radius covers the largest distance the particle can move in one step
 (``force / friction``) on the shortest tracks with margin; ``tests/envs/racing`` checks it.
 
-Observation (f32[W·W + 4]): the ``W×W`` window of the world's 128×128 road mask around the
-agent (1 = road, 0 = grass, row 0 to the north, column 0 to the west), flattened, then the position (x, y) in
-normalised coordinates and the velocity divided by the top speed ``force / friction``.
+Observation (f32[W·W + 4 + 2·R]): optionally the ``W×W`` window of the world's 128×128 road
+mask around the agent (1 = road, 0 = grass, row 0 to the north, column 0 to the west),
+flattened; then the position (x, y) in normalised coordinates, the velocity divided by the top
+speed ``force / friction``, and the route ahead: the R centreline points ``route`` segments
+beyond the agent's, relative to the agent, divided by ``ROUTE_SCALE`` (what a navigation
+display shows). The default is the route without the window (``window=0``): with the paper's
+16×16 window alone, or the window and the route together, neither PPO nor ACKTR learnt to lap
+within 10,000 episodes; with the route alone both do (see ``agents/training.py``).
+
+Training-time respawn (``RacingParams.respawn``): a crash costs the crash penalty, puts the
+particle back on the centreline at rest and the episode goes on (``crashed`` stays true). With
+crashes ending episodes, a learner that crashes after ~15 steps spends the 10,000-episode budget
+on 150,000 steps; with respawn every episode lasts until the lap or the time limit and teaches
+the whole track. Evaluation always uses the paper's rule (a crash ends the episode).
 """
 
 from __future__ import annotations
@@ -34,6 +45,11 @@ from worldagent.errors import WorldagentError
 # Unit force directions of the four actions: +x (east), -x (west), +y (north), -y (south).
 ACTION_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]], dtype=np.float32)
 ACTION_NAMES = ("east", "west", "north", "south")
+
+# Route sensor: centreline points this many segments ahead (~0.0125 units each, so 0.01 to 0.33
+# units: from the next step to the next sharp corner at full speed), in units of ROUTE_SCALE.
+ROUTE_OFFSETS = (1, 3, 5, 8, 11, 15, 20, 26)
+ROUTE_SCALE = 0.1
 
 
 @struct.dataclass
@@ -55,6 +71,8 @@ class RacingParams:
         crash_penalty: reward lost on leaving the road (paper: 300).
         max_steps: steps after which an episode is truncated (paper: 300).
         half_width: road half-width in normalised units (upstream: 40/6 units = 0.02).
+        respawn: on a crash, go back to the centreline at rest and carry on instead of ending
+            the episode (for training; see the module docstring).
     """
 
     force: float = 0.004
@@ -64,6 +82,7 @@ class RacingParams:
     crash_penalty: float = 300.0
     max_steps: int = 300
     half_width: float = HALF_WIDTH
+    respawn: bool = False
 
 
 @struct.dataclass
@@ -78,7 +97,8 @@ class RacingState:
         progress: f32 net laps driven (unwrapped; negative when driving backwards).
         time: i32 steps taken.
         episode_return: f32 sum of rewards.
-        crashed, lap_completed: bool, how the episode ended (if it did).
+        crashed: bool, the agent left the road this episode (with respawn it may carry on).
+        lap_completed: bool, the episode ended with a whole lap.
         done: bool, whether the episode has ended (later steps are not meaningful).
     """
 
@@ -130,12 +150,15 @@ class ParticleRacing(Environment):
     """The Particle Racing environment; static configuration only (see module docstring).
 
     Attributes:
-        window: side W of the square observation window, in road-mask pixels (1/64 units each).
+        window: side W of the square road window in the observation, in road-mask pixels (1/64
+            units each); 0 for none (the default).
+        route: segments ahead of the agent's whose centreline points are observed (may be empty).
         search_radius: segments searched either side of the last one to locate the agent.
         num_points: centreline points K of the worlds this env accepts.
     """
 
-    window: int = 16
+    window: int = 0
+    route: tuple[int, ...] = ROUTE_OFFSETS
     search_radius: int = 8
     num_points: int = NUM_POINTS
 
@@ -143,8 +166,10 @@ class ParticleRacing(Environment):
 
     def __post_init__(self):
         largest = int(ROAD_SIZE * (1.0 - MAX_EXTENT - 2 * HALF_WIDTH))
-        if not 1 <= self.window <= largest:
-            raise WorldagentError(f"window={self.window} is out of range; use 1 to {largest} road-mask pixels.")
+        if not 0 <= self.window <= largest:
+            raise WorldagentError(f"window={self.window} is out of range; use 0 (none) to {largest} road-mask pixels.")
+        if any(not 1 <= offset < self.num_points for offset in self.route):
+            raise WorldagentError(f"route={self.route}: offsets must be 1 to {self.num_points - 1} segments ahead.")
         if self.search_radius < 1 or 2 * self.search_radius + 1 > self.num_points:
             raise WorldagentError(f"search_radius={self.search_radius} must be >= 1 and cover fewer than num_points segments.")
 
@@ -158,7 +183,7 @@ class ParticleRacing(Environment):
 
     @property
     def observation_shape(self) -> tuple[int, ...]:
-        return (self.window * self.window + 4,)
+        return (self.window * self.window + 4 + 2 * len(self.route),)
 
     # -- host-side checks (shapes always; values whenever they are concrete) ------------------
 
@@ -218,9 +243,11 @@ class ParticleRacing(Environment):
 
         crashed = distance > params.half_width
         lap_completed = jnp.logical_and(progress >= 1.0, ~crashed)
-        terminated = jnp.logical_or(crashed, lap_completed)
-        truncated = jnp.logical_and(time >= params.max_steps, ~terminated)
         reward = -params.step_penalty + params.lap_reward * advance - params.crash_penalty * crashed
+        respawn = jnp.logical_and(params.respawn, crashed)
+        position, velocity, arc, progress = _respawn_where(respawn, state.world.centreline, segment, position, velocity, arc, progress)
+        terminated = jnp.logical_or(jnp.logical_and(crashed, ~respawn), lap_completed)
+        truncated = jnp.logical_and(time >= params.max_steps, ~terminated)
 
         state = state.replace(
             position=position,
@@ -230,7 +257,7 @@ class ParticleRacing(Environment):
             progress=progress,
             time=time,
             episode_return=state.episode_return + reward,
-            crashed=crashed,
+            crashed=jnp.logical_or(state.crashed, crashed),
             lap_completed=lap_completed,
             done=jnp.logical_or(terminated, truncated),
         )
@@ -242,12 +269,29 @@ class ParticleRacing(Environment):
         return episode_metrics(state)
 
     def observe(self, state: RacingState, params: RacingParams) -> jax.Array:
-        """f32[W·W + 4]: road window around the agent, position, velocity / top speed."""
-        window = road_window(state.world.road, state.position, self.window)
+        """f32[W·W + 4 + 2·R]: road window (if any), position, velocity / top speed, route ahead."""
+        centreline = state.world.centreline
+        ahead = centreline[(state.segment + jnp.asarray(self.route, jnp.int32)) % centreline.shape[0]]
         top_speed = params.force / params.friction
-        return jnp.concatenate(
-            [window.reshape(-1).astype(jnp.float32), state.position, state.velocity / top_speed]
-        ).astype(jnp.float32)
+        parts = [state.position, state.velocity / top_speed, ((ahead - state.position) / ROUTE_SCALE).reshape(-1)]
+        if self.window:
+            parts.insert(0, road_window(state.world.road, state.position, self.window).reshape(-1))
+        return jnp.concatenate([p.astype(jnp.float32) for p in parts])
+
+
+def _respawn_where(respawn, centreline, segment, position, velocity, arc, progress):
+    """Where ``respawn``: the agent back at its segment's start point, at rest, progress adjusted.
+
+    Progress moves back by the same lap fraction as the position, so a respawn never counts as
+    progress (the next step measures its advance from the respawn point).
+    """
+    back_arc = segment.astype(jnp.float32) / centreline.shape[0]
+    return (
+        jnp.where(respawn, centreline[segment].astype(jnp.float32), position),
+        jnp.where(respawn, 0.0, velocity),
+        jnp.where(respawn, back_arc, arc),
+        jnp.where(respawn, progress + wrap_half(back_arc - arc), progress),
+    )
 
 
 def road_window(road: jax.Array, position: jax.Array, window: int) -> jax.Array:
@@ -278,9 +322,15 @@ def episode_metrics(state: RacingState) -> dict[str, jax.Array]:
 
 
 def split_observation(obs, window: int) -> tuple:
-    """Split observations ``[..., W·W + 4]`` into (window ``[..., W, W]``, position, velocity)."""
+    """Split observations ``[..., W·W + 4 + 2·R]`` into (window ``[..., W, W]``, position, velocity, route ``[..., R, 2]``)."""
     cells = window * window
-    return obs[..., :cells].reshape(*obs.shape[:-1], window, window), obs[..., cells : cells + 2], obs[..., cells + 2 :]
+    route = obs[..., cells + 4 :]
+    return (
+        obs[..., :cells].reshape(*obs.shape[:-1], window, window),
+        obs[..., cells : cells + 2],
+        obs[..., cells + 2 : cells + 4],
+        route.reshape(*obs.shape[:-1], route.shape[-1] // 2, 2),
+    )
 
 
 def _to_pixel_jnp(xy: jax.Array, size: int) -> jax.Array:

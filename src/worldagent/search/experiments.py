@@ -140,10 +140,8 @@ def compare_optimisers(
     Every optimiser gets the same budget; CMA-ES, which evaluates whole generations, may run a
     few more worlds, and only the first ``budget`` count, so that all compare on equal terms.
 
-    For one seed, CMA-ES's first generation (mean 0, step 1) and random search's first draws
-    come from the same generator stream and get the same episode keys: they are (up to pycma's
-    rounding) the same worlds with the same scores. The comparison thus uses common random
-    numbers: what differs between the two is what each does after its first generation.
+    Random search draws from its own stream (``optimisers.RANDOM_STREAM``), so its worlds are
+    not CMA-ES's first generation for the same seed.
 
     Returns:
         {optimiser: [f64[budget] scores in evaluation order, one per seed]} for

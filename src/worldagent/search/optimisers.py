@@ -198,7 +198,9 @@ class RandomSearch(Optimiser):
 
     def __init__(self, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()):
         super().__init__(dim, maximize, seed)
-        self.rng = np.random.default_rng(seed)
+        # Its own stream: with default_rng(seed) its first 21 draws would be CMA-ES's first
+        # generation (σ₀ = 1, mean 0) for the same seed, and comparisons would share them.
+        self.rng = np.random.default_rng([seed, RANDOM_STREAM])
         self.config = config
 
     @property
@@ -212,6 +214,9 @@ class RandomSearch(Optimiser):
 
     def tell(self, z, scores) -> None:
         self._checked(z, scores)
+
+
+RANDOM_STREAM = 1  # RandomSearch's rng is default_rng([seed, RANDOM_STREAM])
 
 
 def make_optimiser(name: str, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()) -> Optimiser:

@@ -34,7 +34,7 @@ RASTER_SIZE = 64  # the VAE's input (paper §5.2.1)
 ROAD_SIZE = 128  # the env's on-road mask, from which observation windows are cut
 ROAD_WORDS = ROAD_SIZE // 32  # the road mask is stored bit-packed: 32 pixels per uint32 word
 # Tracks must stay inside |x|, |y| <= MAX_EXTENT so that the env's observation window (±0.125
-# with the default 16-pixel window), the road's half-width and one step of overshoot stay on
+# with a 16-pixel window, the paper's), the road's half-width and one step of overshoot stay on
 # the road mask. CarRacing's tracks reach at most 0.722 (measured over seeds 0..9999).
 MAX_EXTENT = 0.8
 

@@ -261,7 +261,7 @@ class ParticleRacing(Environment):
             lap_completed=lap_completed,
             done=jnp.logical_or(terminated, truncated),
         )
-        info = {"crashed": crashed, "lap_completed": lap_completed, "progress": progress}
+        info = {"crashed": state.crashed, "lap_completed": lap_completed, "progress": progress}  # crashed: this episode, so far
         return self.observe(state, params), state, reward, terminated, truncated, info
 
     def metrics(self, state: RacingState) -> dict[str, jax.Array]:

@@ -28,7 +28,7 @@ import numpy as np
 
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
-from worldagent.reproduce.presets import SELECTIONS, TAGGER, Preset
+from worldagent.reproduce.presets import TAGGER, Preset
 
 QUALITY_SAMPLES = 1000  # draws z ~ N(0, I) for the generator's coverage / validity figures
 
@@ -314,7 +314,7 @@ def influence_phase(ctx: EnvContext) -> dict:
     env, params = ctx.env_and_params()
     racing = ctx.env == "racing"
     out = ctx.dir / "influence"
-    result = influence(out, ctx.env, ctx.policy(), ctx.generator(), params, parse_selection(SELECTIONS[ctx.env], ctx.env),
+    result = influence(out, ctx.env, ctx.policy(), ctx.generator(), params, parse_selection(ctx.preset.selection(ctx.env), ctx.env),
                        algo=ctx.preset.algo(ctx.env), episodes=budgets.influence_episodes, seeds=tuple(budgets.influence_seeds),
                        candidates=budgets.influence_candidates, search_budget=budgets.influence_search_budget,
                        eval_worlds=budgets.influence_eval_worlds, repeats=ctx.preset.repeats, tagger=None if racing else TAGGER,
@@ -323,7 +323,7 @@ def influence_phase(ctx: EnvContext) -> dict:
     worlds, _, values = load_influenced_worlds(out, ctx.env)
     examples = take_worlds(worlds, example_indices(values, 4))
     figure = influence_figure(result, examples, ctx.env, ctx.figures / "influence.png")
-    return {"influence": ctx.rel(out / "influence.json"), "figure": ctx.rel(figure), "selection": SELECTIONS[ctx.env],
+    return {"influence": ctx.rel(out / "influence.json"), "figure": ctx.rel(figure), "selection": ctx.preset.selection(ctx.env),
             "selected": result["worlds"]["selected"], "summary": influence_summary(result)}
 
 

@@ -185,8 +185,8 @@ QUICK = Preset(
                       influence_eval_worlds=200, influence_seeds=(0,), influence_search_budget=420,
                       influence_selection="crash_rate > 0"),
     harvest=EnvBudgets(worlds=5_000, vae_epochs=10, episodes=1_000, random_worlds=200, strategic_budget=105,
-                       compare_budget=42, bo_budget=21, compare_seeds=(0,), influence_candidates=100, influence_episodes=400,
-                       influence_eval_worlds=50, influence_seeds=(0,), learning_starts=4_000),
+                       compare_budget=42, bo_budget=21, compare_seeds=(0,), influence_candidates=200, influence_episodes=400,
+                       influence_eval_worlds=50, influence_seeds=(0,), influence_search_budget=210, learning_starts=4_000),
 )
 
 TINY = Preset(

@@ -122,6 +122,21 @@ def test_select_worlds_keeps_the_matching_worlds_with_their_latents(tmp_path):
     assert list(values) == ["conflict"] and np.allclose(values["conflict"], 0)
 
 
+def test_select_worlds_keeps_each_distinct_world_once(tmp_path):
+    """Latents that decode to the same world count once: the new distribution is over worlds, not visits."""
+    maps = world_kind("harvest").generate(np.arange(2))
+    store = RunStore(tmp_path)
+    campaign = store.open_campaign("influence-candidates", "harvest", "conflict", False, "random", 4, 0, {}, False)
+    for slot, which in enumerate([0, 1, 0, 0]):  # world 0 visited three times
+        world = type(maps)(walls=maps.walls[which], apples=maps.apples[which])
+        episodes = [{"group_reward": 1.0, "conflict": 0.0, "equality": 0.5, "sustainability": 3.0, "peace": 4.0, "returns": [1, 0, 0, 0]}]
+        store.add(campaign, 0, slot, np.full(3, slot, float), 1.0, episodes, 0.0, world)
+    with store:
+        worlds, latents, _ = select_worlds(store, ["influence-candidates"], "conflict == 0", "harvest")
+    np.testing.assert_array_equal(latents[:, 0], [0, 1])  # the first visit of each world
+    np.testing.assert_array_equal(worlds.walls, np.asarray(maps.walls)[[0, 1]])
+
+
 def test_empty_selection_says_how_many_worlds_were_tried_and_each_metrics_range(tmp_path):
     store, _ = harvest_store(tmp_path, [[1, 2], [3, 4], [5, 6]])
     with store, pytest.raises(WorldagentError) as error:

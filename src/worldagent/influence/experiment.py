@@ -99,11 +99,29 @@ def select_worlds(store, campaign_names: Sequence[str], selection: Selection | s
             f"none of the {len(evaluations)} worlds tried matches '{selection.describe()}' ({ranges}); "
             "loosen the selection or try more worlds (--candidates, --search-budget)."
         )
-    kept = [e for e, k in zip(evaluations, keep) if k]
-    if any(e.world is None for e in kept):
+    kept = [i for i, k in enumerate(keep) if k]
+    if any(evaluations[i].world is None for i in kept):
         raise WorldagentError(f"the store {store.path} lacks the worlds of some evaluations; rerun the candidates with worlds kept.")
-    latents = np.stack([e.latent for e in kept])
-    return stack_worlds(env_name, [e.world for e in kept]), latents, {m: v[keep] for m, v in means.items()}
+    kept = first_of_each_world(evaluations, kept)
+    latents = np.stack([evaluations[i].latent for i in kept])
+    return stack_worlds(env_name, [evaluations[i].world for i in kept]), latents, {m: v[kept] for m, v in means.items()}
+
+
+def first_of_each_world(evaluations: Sequence, indices: Sequence[int]) -> list[int]:
+    """``indices`` without repeated worlds (the first evaluation of each is kept).
+
+    Many latents decode to one world (racing's G maps z to a dataset track) and a search
+    revisits the worlds it likes, so the new distribution is uniform over distinct worlds,
+    not over visits.
+    """
+    seen, unique = set(), []
+    for i in indices:
+        world = evaluations[i].world
+        digest = hashlib.sha256(b"".join(np.ascontiguousarray(world[name]).tobytes() for name in sorted(world))).digest()
+        if digest not in seen:
+            seen.add(digest)
+            unique.append(i)
+    return unique
 
 
 def _range(values: np.ndarray) -> str:

@@ -17,7 +17,7 @@ def test_paper_preset_has_the_papers_budgets():
     assert PAPER.racing.worlds == PAPER.harvest.worlds == 10_000
     assert (PAPER.racing.episodes, PAPER.harvest.episodes) == (10_000, 5_000)
     assert PAPER.repeats == 8 and PAPER.racing.random_worlds == PAPER.harvest.random_worlds == 1_000
-    assert PAPER.vae_hidden == (1024, 512) and PAPER.racing_algo == "acktr"
+    assert PAPER.vae_hidden == (1024, 512) and PAPER.racing_algo == "ppo"  # ACKTR lapped for 1 seed of 3 (see Preset)
 
 
 @pytest.mark.parametrize("preset", list(PRESETS.values()), ids=list(PRESETS))

@@ -295,15 +295,25 @@ def _time(stamp: float | None) -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(stamp)) if stamp else ""
 
 
-def generator_section(run_dir: Path, results: dict) -> str:
+EXTRA_METRICS = {"racing": ("crash_rate",), "harvest": ("conflict", "equality")}  # shown beside the reward
+
+
+def per_env(results: dict, phase: str, render, needs: str | None = None, absent: str = "") -> str:
+    """One ``<h3>`` block per environment: the phase's state when it is not done, ``absent`` when
+    its results lack ``needs``, else ``render(env, res)``; "not run" when there is no environment."""
     parts = []
-    for env in results:
-        res = results[env]
+    for env, res in results.items():
         parts.append(f"<h3>{env}</h3>")
-        state = phase_state(res["phases"]["generator"])
-        if state or "quality" not in res:
-            parts.append(state or missing("no quality.json"))
-            continue
+        state = phase_state(res["phases"][phase])
+        if state or (needs and needs not in res):
+            parts.append(state or missing(absent))
+        else:
+            parts.append(render(env, res))
+    return "".join(parts) or missing("not run")
+
+
+def generator_section(run_dir: Path, results: dict) -> str:
+    def render(env: str, res: dict) -> str:
         quality = res["quality"]
         recon = quality["reconstruction"]
         rows = [["reconstruction: cell accuracy (VAE / mean image)", f"{fmt(recon['vae']['accuracy'])} / {fmt(recon['mean_image']['accuracy'])}"],
@@ -311,60 +321,42 @@ def generator_section(run_dir: Path, results: dict) -> str:
                 ["held-out worlds", fmt(recon["worlds"])], ["training epochs", fmt(quality["training"]["epochs"])],
                 ["final held-out loss", fmt(quality["training"]["final"]["holdout_loss"])]]
         rows += [[name.replace("_", " "), fmt(value)] for name, value in quality.get(env, {}).items()]
-        parts.append(table(["measure", "value"], rows))
-        parts.append(image(run_dir / env / "figures" / "generator_traversals.png", f"{env}: latent traversals of G(z) (one row per latent dimension)"))
-    return "".join(parts) or missing("not run")
+        return (table(["measure", "value"], rows)
+                + image(run_dir / env / "figures" / "generator_traversals.png", f"{env}: latent traversals of G(z) (one row per latent dimension)"))
+
+    return per_env(results, "generator", render, "quality", "no quality.json")
 
 
 def training_section(run_dir: Path, results: dict) -> str:
-    parts = []
-    for env, res in results.items():
-        parts.append(f"<h3>{env}</h3>")
-        entry = res["phases"]["agent"]
-        state = phase_state(entry)
-        if state:
-            parts.append(state)
-            continue
-        outputs = entry["outputs"]
+    def render(env: str, res: dict) -> str:
+        outputs = res["phases"]["agent"]["outputs"]
         rows = [["algorithm", outputs.get("algo")], ["episodes", fmt(outputs.get("episodes"))], ["env steps", fmt(outputs.get("env_steps"))],
                 ["training s", fmt(outputs.get("train_s"))]] + [[f"last: {k}", fmt(v)] for k, v in outputs.get("final", {}).items()]
-        parts.append(table(["", ""], rows))
-        parts.append(image(run_dir / outputs["curve"], f"{env}: learning curve"))
-    return "".join(parts) or missing("not run")
+        return table(["", ""], rows) + image(run_dir / outputs["curve"], f"{env}: learning curve")
+
+    return per_env(results, "agent", render)
 
 
 def random_section(run_dir: Path, results: dict) -> str:
     from worldagent.reports.figures import distribution_figure
 
-    parts = []
-    for env, res in results.items():
-        parts.append(f"<h3>{env}</h3>")
-        state = phase_state(res["phases"]["random"])
-        if state or "random" not in res:
-            parts.append(state or missing("no random campaign in the store"))
-            continue
+    def render(env: str, res: dict) -> str:
         random = res["random"]
         rows = [[f"<td>worlds x episodes</td><td class='num'>{random['worlds']} x {res['phases']['random']['config']['repeats']}</td>"],
                 ["<td>mean reward (raw)</td>" + number(f"{env}.random.mean_raw", random["mean_raw"])],
                 ["<td>mean reward (normalised)</td>" + number(f"{env}.random.mean_normalised", random["mean_normalised"])]]
-        extra = ("crash_rate",) if env == "racing" else ("conflict", "equality")
-        rows += [[f"<td>mean {name.replace('_', ' ')}</td>" + number(f"{env}.random.{name}", random[name])] for name in extra]
-        parts.append(table(["", "value"], rows, raw_cells=True))
+        rows += [[f"<td>mean {name.replace('_', ' ')}</td>" + number(f"{env}.random.{name}", random[name])] for name in EXTRA_METRICS[env]]
         figure = distribution_figure({"random worlds": random["normalised"]}, f"{res['metric']} (normalised)", run_dir / env / "figures" / "random.png",
                                      f"{env}: reward over {random['worlds']} random worlds")
-        parts.append(image(figure, f"{env}: distribution of the normalised reward over random worlds (cf. Figure 6a)"))
-    return "".join(parts) or missing("not run")
+        return (table(["", "value"], rows, raw_cells=True)
+                + image(figure, f"{env}: distribution of the normalised reward over random worlds (cf. Figure 6a)"))
+
+    return per_env(results, "random", render, "random", "no random campaign in the store")
 
 
 def strategic_section(run_dir: Path, results: dict) -> str:
-    parts = []
-    for env, res in results.items():
-        parts.append(f"<h3>{env}</h3>")
-        state = phase_state(res["phases"]["strategic"])
-        if state or "min" not in res:
-            parts.append(state or missing("no strategic campaigns in the store"))
-            continue
-        extra = ("crash_rate",) if env == "racing" else ("conflict", "equality")
+    def render(env: str, res: dict) -> str:
+        extra = EXTRA_METRICS[env]
         rows = []
         for label in ("min", "max"):
             found = res[label]
@@ -372,31 +364,23 @@ def strategic_section(run_dir: Path, results: dict) -> str:
                          f"{found['evaluated']} worlds searched)</td>", number(f"{env}.{label}.raw", found["raw"]),
                          number(f"{env}.{label}.normalised", found["normalised"]),
                          *[number(f"{env}.{label}.{name}", found[name]) for name in extra]])
-        parts.append(table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True))
-        parts.append(image(run_dir / env / "figures" / "strategic.png", f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)"))
-    return "".join(parts) or missing("not run")
+        return (table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True)
+                + image(run_dir / env / "figures" / "strategic.png", f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)"))
+
+    return per_env(results, "strategic", render, "min", "no strategic campaigns in the store")
 
 
 def comparison_section(run_dir: Path, results: dict) -> str:
     from worldagent.reports.comparison import comparison_figure, sample_efficiency
 
-    parts = []
-    for env, res in results.items():
-        parts.append(f"<h3>{env}</h3>")
-        entry = res["phases"]["compare"]
-        state = phase_state(entry)
-        if state:
-            parts.append(state)
-            continue
-        if "skipped" in entry.get("outputs", {}):
-            parts.append(missing(f"skipped: {entry['outputs']['skipped']}"))
-            continue
+    def render(env: str, res: dict) -> str:
+        outputs = res["phases"]["compare"].get("outputs", {})
+        if "skipped" in outputs:
+            return missing(f"skipped: {outputs['skipped']}")
         if "compare" not in res:
-            parts.append(missing("no comparison campaigns in the store"))
-            continue
+            return missing("no comparison campaigns in the store")
         runs, random = res["compare"]["runs"], res["random"]["scores"]
         rows = sample_efficiency(runs, random, maximize=False)
-        res["compare"]["rows"] = rows
         quantiles = [k[len("median_q"):] for k in rows[0] if k.startswith("median_q")]
         body = []
         for row in rows:
@@ -408,34 +392,30 @@ def comparison_section(run_dir: Path, results: dict) -> str:
             body.append(cells)
         head = ["optimiser", "seeds", "worlds/seed", *[f"worlds to reach random q{q} (≤ {fmt(rows[0][f'threshold_q{q}'])})" for q in quantiles],
                 f"best {res['metric']} (mean over seeds)", f"mean {res['metric']} sampled"]
-        parts.append(table(head, body, raw_cells=True))
-        parts.append("<p>Worlds each optimiser evaluated (median over seeds) before its first world scoring at or below the random "
-                     "distribution's q-quantile; random sampling needs 1/q on average.</p>")
         figure = comparison_figure(runs, random, res["metric"], run_dir / env / "figures" / "comparison.png", maximize=False)
-        parts.append(image(figure, f"{env}: rewards of the worlds each optimiser sampled while minimising reward, against random worlds (cf. Figure 7)"))
-    return "".join(parts) or missing("not run")
+        return (table(head, body, raw_cells=True)
+                + "<p>Worlds each optimiser evaluated (median over seeds) before its first world scoring at or below the random "
+                  "distribution's q-quantile; random sampling needs 1/q on average.</p>"
+                + image(figure, f"{env}: rewards of the worlds each optimiser sampled while minimising reward, against random worlds (cf. Figure 7)"))
+
+    return per_env(results, "compare", render)
 
 
 def influence_section(run_dir: Path, results: dict) -> str:
-    parts = []
-    for env, res in results.items():
-        parts.append(f"<h3>{env}</h3>")
-        state = phase_state(res["phases"]["influence"])
-        if state or "influence" not in res:
-            parts.append(state or missing("no influence.json"))
-            continue
+    def render(env: str, res: dict) -> str:
         result = res["influence"]
         worlds = result["worlds"]
-        parts.append(f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
-                     f"became the influenced training distribution; agents trained with seeds {esc(result['config']['seeds'])}, "
-                     f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>")
         rows = []
         for metric, by_label in result["summary"].items():
             rows.append([f"<td>{esc(metric)}</td>"] + [number(f"{env}.influence.{metric}_{label}", by_label[label]["mean"]) +
                                                         f"<td class='num'>{fmt(by_label[label]['ci95'], 3)}</td>" for label in ("default", "influenced")])
-        parts.append(table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True))
-        parts.append(image(run_dir / env / "figures" / "influence.png", f"{env}: default against influenced training, with worlds of the influenced distribution (cf. Figure 8)"))
-    return "".join(parts) or missing("not run")
+        return (f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
+                f"became the influenced training distribution; agents trained with seeds {esc(result['config']['seeds'])}, "
+                f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
+                + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)
+                + image(run_dir / env / "figures" / "influence.png", f"{env}: default against influenced training, with worlds of the influenced distribution (cf. Figure 8)"))
+
+    return per_env(results, "influence", render, "influence", "no influence.json")
 
 
 def headline_section(rows: list[Headline]) -> str:

@@ -20,17 +20,15 @@ counted in episodes and updates after it is spent are skipped), so the host loop
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import jax
 import jax.numpy as jnp
-from flax import struct
 
 from worldagent.agents import training
-from worldagent.agents.kfac import KFAC, KFACConfig, KFACState
+from worldagent.agents.kfac import KFAC, KFACConfig
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.ppo import CURVE_FIELDS, Trainer, budgeted_trainer, max_updates, training_params
-from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
+from worldagent.agents.ppo import CURVE_FIELDS, Trainer, TrainState, budgeted_trainer, max_updates, raw_key, training_params
+from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
 
@@ -121,35 +119,6 @@ class ACKTRConfig(JsonConfig):
         )  # fmt: skip
 
 
-@struct.dataclass
-class ACKTRState:
-    """Everything a run carries between updates (the checkpoint).
-
-    Attributes:
-        params: the actor-critic's variables (``{"params": ...}``).
-        opt_state: K-FAC's state (``kfac.KFACState``).
-        runner: the envs mid-episode (``rollouts.EnvRunner``).
-        key: the run's PRNG key as raw ``u32`` key data (``jax.random.key_data``; typed keys do
-            not serialise to msgpack), kept so that a resumed run continues identically.
-        update: i32 updates done.
-        episodes: i32 episodes ended so far.
-        env_steps: i32 env steps taken so far.
-    """
-
-    params: Any
-    opt_state: KFACState
-    runner: EnvRunner
-    key: jax.Array
-    update: jax.Array
-    episodes: jax.Array
-    env_steps: jax.Array
-
-
-def _key_data(key: jax.Array) -> jax.Array:
-    """u32 key data of a typed or raw PRNG key."""
-    return jax.random.key_data(key) if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) else key
-
-
 def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
     """ACKTR on ``env`` with each episode's world drawn from ``distribution``.
 
@@ -177,14 +146,14 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
     budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
     example_obs = jnp.zeros((batch, *env.observation_shape), jnp.float32)
 
-    def init(key: jax.Array) -> ACKTRState:
+    def init(key: jax.Array) -> TrainState:
         key_net, key_env, key_run = jax.random.split(key, 3)
         params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
         runner = init_runner(key_env, env, env_params, distribution, config.num_envs)
         zero = jnp.int32(0)
-        return ACKTRState(params, kfac.init(params, example_obs), runner, _key_data(key_run), zero, zero, zero)
+        return TrainState(params, kfac.init(params, example_obs), runner, raw_key(key_run), zero, zero, zero)
 
-    def update(state: ACKTRState) -> tuple[ACKTRState, dict]:
+    def update(state: TrainState) -> tuple[TrainState, dict]:
         key, key_roll, key_fisher = jax.random.split(jax.random.wrap_key_data(state.key), 3)
         runner, traj, last = collect(key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps)
         last_value = last[0] if isinstance(last, tuple) else last  # (value, potential) in newer rollouts
@@ -219,8 +188,8 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
             jax.tree_util.tree_map(lambda g: scale * g, grads), stats, state.opt_state, state.params["params"]
         )  # annealing η_max ≡ scaling the gradient, as the trust region bounds the product
         summary = episode_summary(traj)
-        new_state = ACKTRState(
-            {**state.params, "params": params}, opt_state, runner, _key_data(key), state.update + 1,
+        new_state = TrainState(
+            {**state.params, "params": params}, opt_state, runner, raw_key(key), state.update + 1,
             state.episodes + summary["episodes"], state.env_steps + batch,
         )  # fmt: skip
         row = {

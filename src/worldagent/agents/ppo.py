@@ -115,12 +115,12 @@ class PPOConfig(JsonConfig):
 
 
 @struct.dataclass
-class PPOState:
+class TrainState:
     """Everything a run carries between updates (the checkpoint).
 
     Attributes:
         params: the actor-critic's parameters.
-        opt_state: Adam's state.
+        opt_state: the optimiser's state (Adam for PPO, K-FAC for ACKTR).
         runner: the envs mid-episode (``rollouts.EnvRunner``).
         key: the run's PRNG key as raw u32 key data (kept so that a resumed run continues
             identically; raw so that msgpack can write it).
@@ -142,7 +142,7 @@ class Trainer(NamedTuple):
     """What ``make_train`` returns (all pure; ``train_chunk`` and ``train`` are jitted).
 
     Attributes:
-        init: ``init(key) -> PPOState``.
+        init: ``init(key) -> TrainState``.
         train_chunk: ``train_chunk(state, n) -> (state, curve)``, ``n`` updates (static); each
             ``curve`` entry is f32[n] (see ``CURVE_FIELDS``).
         train: ``train(key) -> (state, curve)``, the whole budget (``max_updates`` rows).
@@ -164,7 +164,7 @@ CURVE_FIELDS = ("active", "episodes", "env_steps", "return", "length", "crashed"
                 "policy_loss", "value_loss", "entropy", "approx_kl", "learning_rate")
 
 
-def _raw_key(key: jax.Array) -> jax.Array:
+def raw_key(key: jax.Array) -> jax.Array:
     """u32 key data (serialisable with msgpack) of a typed or raw PRNG key."""
     return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
 
@@ -230,12 +230,12 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
     horizon = int(env_params.max_steps)
     budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, horizon)
 
-    def init(key: jax.Array) -> PPOState:
+    def init(key: jax.Array) -> TrainState:
         key_net, key_env, key_run = jax.random.split(key, 3)
         params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
         runner = init_runner(key_env, env, env_params, distribution, config.num_envs)
         zero = jnp.int32(0)
-        return PPOState(params, tx.init(params), runner, _raw_key(key_run), zero, zero, zero)
+        return TrainState(params, tx.init(params), runner, raw_key(key_run), zero, zero, zero)
 
     def loss_fn(params, batch_data, clip_eps):
         obs, action, old_log_prob, old_value, advantage, target = batch_data
@@ -254,7 +254,7 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
         approx_kl = ((ratio - 1) - (log_prob - old_log_prob)).mean()
         return total, (policy_loss, value_loss, ent, approx_kl)
 
-    def update(state: PPOState) -> tuple[PPOState, dict]:
+    def update(state: TrainState) -> tuple[TrainState, dict]:
         key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
         runner, traj, (last_value, _) = collect(
             key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps
@@ -281,8 +281,8 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
 
         (params, opt_state), aux = jax.lax.scan(epoch, (state.params, state.opt_state), jax.random.split(key_perm, config.update_epochs))
         summary = episode_summary(traj)
-        new_state = PPOState(
-            params, opt_state, runner, _raw_key(key), state.update + 1, state.episodes + summary["episodes"], state.env_steps + batch
+        new_state = TrainState(
+            params, opt_state, runner, raw_key(key), state.update + 1, state.episodes + summary["episodes"], state.env_steps + batch
         )
         policy_loss, value_loss, ent, approx_kl = (x.mean() for x in aux)
         row = {

@@ -26,7 +26,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import describe_machine, record  # noqa: E402
-
 from worldagent.envs.core import step_autoreset  # noqa: E402
 from worldagent.envs.harvest.env import NUM_AGENTS, Harvest, make_params  # noqa: E402
 from worldagent.envs.harvest.maps import generate_maps  # noqa: E402

@@ -15,7 +15,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import record  # noqa: E402
-
 from worldagent.envs.harvest.maps import generate_maps, seeds_from  # noqa: E402
 
 
@@ -30,7 +29,9 @@ def main() -> None:
     generate_maps(seeds_from(args.num_maps, args.num_maps))
     warm = time.perf_counter() - start
     print(f"{args.num_maps} maps: {cold:.2f} s with compilation, {warm:.2f} s warm")
-    print(f"recorded in {record('map_generation', {'num_maps': args.num_maps, 'seconds_with_compile': round(cold, 3), 'seconds_warm': round(warm, 3)})}")
+    print(
+        f"recorded in {record('map_generation', {'num_maps': args.num_maps, 'seconds_with_compile': round(cold, 3), 'seconds_warm': round(warm, 3)})}"
+    )
 
 
 if __name__ == "__main__":

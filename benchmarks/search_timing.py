@@ -20,7 +20,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import record  # noqa: E402
-
 from worldagent.agents.policy import racing_driver_policy  # noqa: E402
 from worldagent.envs.racing.env import ParticleRacing  # noqa: E402
 from worldagent.search.objectives import LatentObjective, Objective  # noqa: E402
@@ -46,7 +45,9 @@ def main() -> None:
     args = parser.parse_args()
 
     generator, _, _ = load_generator(args.generator)
-    objective = LatentObjective(Objective("racing", "return", False), ParticleRacing(), racing_driver_policy(), generator, repeats=8, keep_worlds=False)
+    objective = LatentObjective(
+        Objective("racing", "return", False), ParticleRacing(), racing_driver_policy(), generator, repeats=8, keep_worlds=False
+    )
     cmaes = make_optimiser("cmaes", generator.latent_dim, maximize=False, seed=0)
 
     def generation():
@@ -59,7 +60,12 @@ def main() -> None:
     random_s = best_time(lambda: objective(z_random, np.arange(args.worlds)), args.repeats)
     print(f"one CMA-ES generation (21 worlds x 8 episodes, decode + repair + ask/tell): {generation_s:.3f} s")
     print(f"random evaluation ({args.worlds} worlds x 8 episodes): {random_s:.2f} s")
-    result = {"generation_seconds": round(generation_s, 4), "random_evaluation_seconds": round(random_s, 3), "worlds": args.worlds, "agent": "racing driver"}
+    result = {
+        "generation_seconds": round(generation_s, 4),
+        "random_evaluation_seconds": round(random_s, 3),
+        "worlds": args.worlds,
+        "agent": "racing driver",
+    }
     print(f"recorded in {record('search_timing', result)}")
 
 

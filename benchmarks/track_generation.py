@@ -19,7 +19,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from machine import record  # noqa: E402
-
 from worldagent.envs.racing.tracks import footprint, generate_tracks, rasterize, resample_loop, upstream_loops  # noqa: E402
 from worldagent.envs.racing.world import NUM_POINTS, PLAYFIELD, RASTER_SIZE, ROAD_SIZE, pack_road  # noqa: E402
 
@@ -39,7 +38,7 @@ def main() -> None:
 
     tracks, total = timed(generate_tracks, seeds)
     (loops, retries), walker = timed(upstream_loops, seeds, return_retries=True)
-    centrelines, resample = timed(lambda: np.stack([resample_loop(l[:, 2:], NUM_POINTS) for l in loops]) / PLAYFIELD)
+    centrelines, resample = timed(lambda: np.stack([resample_loop(loop[:, 2:], NUM_POINTS) for loop in loops]) / PLAYFIELD)
     centrelines = centrelines.astype(np.float32)
     raster, raster_time = timed(footprint, centrelines, RASTER_SIZE)
     road, road_time = timed(lambda: pack_road(rasterize(centrelines, ROAD_SIZE)))

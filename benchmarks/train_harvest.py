@@ -30,7 +30,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import describe_machine, record  # noqa: E402
-
 from worldagent.agents.distributions import WorldPool  # noqa: E402
 from worldagent.agents.dqn import DQNConfig, make_act  # noqa: E402
 from worldagent.agents.dqn_run import evaluate, train_harvest  # noqa: E402
@@ -77,7 +76,11 @@ def main(argv=None) -> dict:
     worlds = generate_maps(seeds_from(EVAL_SEED, args.eval_worlds))
     key = jax.random.key(args.seed + 1)
     trained = summary(evaluate(key, make_act(config), result.params, worlds, config, args.repeats))
-    by_epsilon = {str(eps): summary(evaluate(key, make_act(config, eps), result.params, worlds, config, args.repeats)) for eps in (0.0, 0.05, 0.1) if eps != config.act_epsilon}
+    by_epsilon = {
+        str(eps): summary(evaluate(key, make_act(config, eps), result.params, worlds, config, args.repeats))
+        for eps in (0.0, 0.05, 0.1)
+        if eps != config.act_epsilon
+    }
     random = summary(evaluate(key, random_act, None, worlds, config, args.repeats))
     figures = {
         "command": "python benchmarks/train_harvest.py " + " ".join(argv if argv is not None else sys.argv[1:]),
@@ -91,7 +94,12 @@ def main(argv=None) -> dict:
         "paper_budget_wall_min": round(full_budget_s / 60, 1),
         "paper_budget_wall_is": "measured" if config.num_chunks * config.num_envs >= PAPER_EPISODES else "extrapolated from the measured rate",
         "target_min": TARGET_MINUTES,
-        "eval": {"worlds": args.eval_worlds, "repeats": args.repeats, "first_seed": EVAL_SEED, "policy": f"epsilon-greedy, act_epsilon {config.act_epsilon}"},
+        "eval": {
+            "worlds": args.eval_worlds,
+            "repeats": args.repeats,
+            "first_seed": EVAL_SEED,
+            "policy": f"epsilon-greedy, act_epsilon {config.act_epsilon}",
+        },
         "trained": trained,
         "random": random,
         "trained_at_other_epsilon": by_epsilon,

@@ -21,14 +21,13 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import record  # noqa: E402
-
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
+from machine import record  # noqa: E402
+from worldagent.agents.acktr import ACKTRConfig  # noqa: E402  (importing it registers "acktr" for train_racing)
 from worldagent.agents.distributions import LatentWorlds, world_distribution  # noqa: E402
 from worldagent.agents.metrics import normalised_return, racing_return_bounds  # noqa: E402
-from worldagent.agents.acktr import ACKTRConfig  # noqa: E402  (importing it registers "acktr" for train_racing)
 from worldagent.agents.ppo import PPOConfig  # noqa: E402
 from worldagent.agents.training import train_racing  # noqa: E402
 from worldagent.envs.core import rollout  # noqa: E402
@@ -81,8 +80,16 @@ def main() -> None:
     start = time.perf_counter()
     pool = world_distribution("racing", "generator", size=10_000, seed=0)
     pool_seconds = time.perf_counter() - start
-    result = train_racing(config, pool, out, args.algo, seed=args.seed, progress=True, resume=not args.no_resume,
-                          distribution_spec="generator (procedural pool of 10,000, seeds 0..9999)")
+    result = train_racing(
+        config,
+        pool,
+        out,
+        args.algo,
+        seed=args.seed,
+        progress=True,
+        resume=not args.no_resume,
+        distribution_spec="generator (procedural pool of 10,000, seeds 0..9999)",
+    )
     steps_per_s = result.env_steps / result.wall_seconds
 
     start = time.perf_counter()
@@ -118,9 +125,11 @@ def main() -> None:
         "final_curve": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
     }
     ev = summary["evaluation"]
-    print(f"{args.algo}: {result.episodes:,} episodes, {result.env_steps:,} env steps in {result.wall_seconds:.0f} s "
-          f"({steps_per_s:,.0f} steps/s); eval on {args.eval_worlds} worlds x {args.repeats}: crash {ev['crash_rate']:.3f}, "
-          f"lap {ev['lap_rate']:.3f}, return {ev['mean_return_raw']:.1f} raw / {ev['mean_return_normalised']:.3f} normalised")
+    print(
+        f"{args.algo}: {result.episodes:,} episodes, {result.env_steps:,} env steps in {result.wall_seconds:.0f} s "
+        f"({steps_per_s:,.0f} steps/s); eval on {args.eval_worlds} worlds x {args.repeats}: crash {ev['crash_rate']:.3f}, "
+        f"lap {ev['lap_rate']:.3f}, return {ev['mean_return_raw']:.1f} raw / {ev['mean_return_normalised']:.3f} normalised"
+    )
     print(f"recorded in {record(f'train_racing_{args.algo}', summary)}")
 
 

@@ -17,7 +17,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import record  # noqa: E402
-
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator, save_generator  # noqa: E402
 from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
@@ -52,8 +51,10 @@ def main() -> None:
         "final": vae.history[-1],
         "holdout_loss_by_epoch": [round(h["holdout_loss"], 2) for h in vae.history],
     }
-    print(f"{args.env}: dataset {dataset_seconds:.1f} s, training {train_seconds:.1f} s ({config.epochs} epochs), "
-          f"held-out loss {vae.history[0]['holdout_loss']:.1f} -> {vae.history[-1]['holdout_loss']:.1f}")
+    print(
+        f"{args.env}: dataset {dataset_seconds:.1f} s, training {train_seconds:.1f} s ({config.epochs} epochs), "
+        f"held-out loss {vae.history[0]['holdout_loss']:.1f} -> {vae.history[-1]['holdout_loss']:.1f}"
+    )
     print(f"recorded in {record(f'vae_training_{args.env}', result)}")
 
 

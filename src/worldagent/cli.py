@@ -68,8 +68,8 @@ def drive(
     from worldagent.envs.racing.driver import driver_policy
     from worldagent.envs.racing.env import ParticleRacing, episode_metrics
     from worldagent.envs.racing.render import save_episode_gif, track_image
-    from worldagent.files import save_png
     from worldagent.envs.racing.tracks import generate_track
+    from worldagent.files import save_png
 
     policies = {"driver": None, "random": lambda k, obs, state: jax.random.randint(k, (), 0, 4)}
     if policy not in policies:
@@ -109,8 +109,6 @@ def maps(
         raise WorldagentError(f"--n is {n}; ask for at least one map.")
     draw_map_sheet(generate_maps(seeds_from(seed, n)), out)
     console.print(f"wrote {n} maps to {out}")
-
-
 
 
 @app.command()
@@ -223,7 +221,11 @@ def search(
     env: str = typer.Argument(..., help=ENV_HELP),
     agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
     generator: Path = typer.Option(..., "--generator", help="Generator directory (from `worldagent generator train`)."),
-    objective: str = typer.Option("reward", "--objective", help="Metric: reward, or racing return|normalised_return|crashed|lap_completed|progress|steps, harvest group_reward|conflict|equality|sustainability|peace."),
+    objective: str = typer.Option(
+        "reward",
+        "--objective",
+        help="Metric: reward, or racing return|normalised_return|crashed|lap_completed|progress|steps, harvest group_reward|conflict|equality|sustainability|peace.",
+    ),
     minimize: bool = typer.Option(False, "--minimize/--maximize", help="Direction of the search."),
     optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes, bo or random."),
     budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate (rounded up to whole CMA-ES generations)."),
@@ -241,7 +243,9 @@ def search(
 
     direction = "min" if minimize else "max"
     name = name or f"{optimiser}-{direction}-{metric_name(env, objective)}-s{seed}"
-    evaluations, spec = campaign(env, agent, generator, objective, not minimize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet)
+    evaluations, spec = campaign(
+        env, agent, generator, objective, not minimize, optimiser, budget, repeats, seed, out, name, resume, tagger, greedy, quiet
+    )
     scores = np.array([e.score for e in evaluations])
     best = evaluations[int(np.nanargmin(scores) if minimize else np.nanargmax(scores))]
     console.print(
@@ -277,9 +281,13 @@ def evaluate_random(
 
     config = OptimiserConfig(random_batch=min(max(worlds, 1), 250))
     name = f"random-{metric_name(env, metric)}-s{seed}"
-    evaluations, spec = campaign(env, agent, generator, metric, True, "random", worlds, repeats, seed, out, name, resume, tagger, greedy, quiet, config)
+    evaluations, spec = campaign(
+        env, agent, generator, metric, True, "random", worlds, repeats, seed, out, name, resume, tagger, greedy, quiet, config
+    )
     scores = np.array([e.score for e in evaluations])
-    figure = distribution_figure({"random worlds": scores}, spec.objective, out / f"{name}.png", f"{env}: {spec.objective} over {len(scores)} random worlds")
+    figure = distribution_figure(
+        {"random worlds": scores}, spec.objective, out / f"{name}.png", f"{env}: {spec.objective} over {len(scores)} random worlds"
+    )
     line = f"{name}: {len(scores)} worlds x {repeats} episodes; {spec.objective} mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})"
     if env == "racing" and spec.objective == "return":
         normalised = np.array([np.mean([e["normalised_return"] for e in ev.episodes]) for ev in evaluations])
@@ -297,7 +305,9 @@ def train(
     out: Path = typer.Option(..., "--out", help="Run directory: checkpoint, learning curve (CSV, PNG), the saved agent."),
     algo: str = typer.Option(None, "--algo", help="racing: acktr (the paper's) or ppo; harvest: dqn (independent DQNs)."),
     episodes: int = typer.Option(None, "--episodes", help="Training episodes (default: the paper's budget, racing 10,000, harvest 5,000)."),
-    worlds: str = typer.Option("generator", "--worlds", help="Training worlds: generator (procedural), vae (G(z), needs --generator), or a dataset .npz."),
+    worlds: str = typer.Option(
+        "generator", "--worlds", help="Training worlds: generator (procedural), vae (G(z), needs --generator), or a dataset .npz."
+    ),
     generator: Path = typer.Option(None, "--generator", help="Generator directory for --worlds vae."),
     tagger: list[int] = typer.Option([], "--tagger", help="Harvest: the agent allowed to TAG (the paper's influencing experiment: 0)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the run."),

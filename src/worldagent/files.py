@@ -6,8 +6,8 @@ A reader (or a resumed run) never sees a half-written file, even if the writer i
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 
 def write_atomically(path: Path | str, save: Callable[[Path], None]) -> Path:

@@ -23,9 +23,10 @@ import io
 import json
 import sqlite3
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -147,7 +148,7 @@ class RunStore:
     def close(self) -> None:
         self.db.close()
 
-    def __enter__(self) -> "RunStore":
+    def __enter__(self) -> RunStore:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -166,7 +167,9 @@ class RunStore:
     def campaigns(self) -> list[Campaign]:
         return [self.campaign(row[0]) for row in self.db.execute("SELECT name FROM campaigns ORDER BY id")]
 
-    def open_campaign(self, name: str, env: str, objective: str, maximize: bool, optimiser: str, budget: int, seed: int, config: dict, resume: bool) -> Campaign:
+    def open_campaign(
+        self, name: str, env: str, objective: str, maximize: bool, optimiser: str, budget: int, seed: int, config: dict, resume: bool
+    ) -> Campaign:
         """Create campaign ``name``, or (``resume``) return it after checking it is the same campaign."""
         existing = self.campaign(name)
         wanted = dict(env=env, objective=objective, maximize=bool(maximize), optimiser=optimiser, seed=int(seed), config=config)
@@ -179,7 +182,14 @@ class RunStore:
             return self.campaign(name)
         if not resume:
             raise WorldagentError(f"campaign {name!r} already exists in {self.path}; pass --resume to continue it or choose another --name.")
-        have = dict(env=existing.env, objective=existing.objective, maximize=existing.maximize, optimiser=existing.optimiser, seed=existing.seed, config=existing.config)
+        have = dict(
+            env=existing.env,
+            objective=existing.objective,
+            maximize=existing.maximize,
+            optimiser=existing.optimiser,
+            seed=existing.seed,
+            config=existing.config,
+        )
         if have != json.loads(json.dumps(wanted, sort_keys=True)):
             differing = sorted(k for k in have if have[k] != json.loads(json.dumps(wanted[k], sort_keys=True)))
             raise WorldagentError(f"campaign {name!r} was started with other settings ({', '.join(differing)}); resume it with the same ones.")
@@ -190,7 +200,9 @@ class RunStore:
 
     # -- evaluations ----------------------------------------------------------------------------
 
-    def add(self, campaign: Campaign, generation: int, slot: int, latent, score: float, episodes: list[dict], started: float, world: Any = None) -> None:
+    def add(
+        self, campaign: Campaign, generation: int, slot: int, latent, score: float, episodes: list[dict], started: float, world: Any = None
+    ) -> None:
         """Commit one finished evaluation (atomic; a re-run of the same slot is refused)."""
         blob = encode_world(world) if world is not None else None
         value = float(score) if np.isfinite(score) else None  # SQLite has no NaN: NULL is "not a number"
@@ -198,10 +210,22 @@ class RunStore:
             with self.db:
                 self.db.execute(
                     "INSERT INTO evaluations (campaign_id, generation, slot, latent, world, score, episodes, started, finished) VALUES (?,?,?,?,?,?,?,?,?)",
-                    (campaign.id, generation, slot, json.dumps([float(x) for x in np.ravel(latent)]), blob, value, json.dumps(episodes, default=_json_number), started, time.time()),
+                    (
+                        campaign.id,
+                        generation,
+                        slot,
+                        json.dumps([float(x) for x in np.ravel(latent)]),
+                        blob,
+                        value,
+                        json.dumps(episodes, default=_json_number),
+                        started,
+                        time.time(),
+                    ),
                 )
         except sqlite3.IntegrityError:
-            raise WorldagentError(f"campaign {campaign.name!r} already has generation {generation} slot {slot}; evaluations are never overwritten.") from None
+            raise WorldagentError(
+                f"campaign {campaign.name!r} already has generation {generation} slot {slot}; evaluations are never overwritten."
+            ) from None
 
     def evaluations(self, campaign: str | None = None, with_worlds: bool = False) -> list[Evaluation]:
         """Evaluations in order (generation, slot), of one campaign or of all."""
@@ -217,8 +241,15 @@ class RunStore:
         )
         for name, generation, slot, latent, score, episodes, started, finished, world in self.db.execute(query, (campaign,) if campaign else ()):
             yield Evaluation(
-                name, generation, slot, np.asarray(json.loads(latent)), float("nan") if score is None else score,
-                json.loads(episodes), started, finished, decode_world(world) if world is not None else None,
+                name,
+                generation,
+                slot,
+                np.asarray(json.loads(latent)),
+                float("nan") if score is None else score,
+                json.loads(episodes),
+                started,
+                finished,
+                decode_world(world) if world is not None else None,
             )
 
     def export_csv(self, out: Path | str, campaign: str | None = None) -> Path:

@@ -34,12 +34,15 @@ def test_uniform_by_default(racing_pool):
     np.testing.assert_allclose(racing_pool.probs, np.full(8, 1 / 8), rtol=1e-6)
 
 
-@pytest.mark.parametrize("weights, message", [
-    ([1.0, np.nan, 1, 1, 1, 1, 1, 1], "NaN"),
-    ([1.0, -1, 1, 1, 1, 1, 1, 1], "negative"),
-    (np.zeros(8), "all zero"),
-    (np.ones(3), "shape"),
-])
+@pytest.mark.parametrize(
+    "weights, message",
+    [
+        ([1.0, np.nan, 1, 1, 1, 1, 1, 1], "NaN"),
+        ([1.0, -1, 1, 1, 1, 1, 1, 1], "negative"),
+        (np.zeros(8), "all zero"),
+        (np.ones(3), "shape"),
+    ],
+)
 def test_bad_weights_refused(racing_pool, weights, message):
     with pytest.raises(WorldagentError, match=message):
         WorldPool.create(racing_pool.worlds, weights)

@@ -33,9 +33,20 @@ TINY_MAP = """
 
 # Small window and short episodes: the tiny map is in view from every corner.
 TINY = DQNConfig(
-    num_episodes=16 * 8, episode_length=50, num_envs=16, view_size=9, view_behind=2, hidden_sizes=(32, 32),
-    batch_size=64, buffer_size=8_000, learning_starts=200, target_update_every=100, learning_rate=1e-3,
-    epsilon_decay_episodes=16 * 4, checkpoint_every=4, seed=0,
+    num_episodes=16 * 8,
+    episode_length=50,
+    num_envs=16,
+    view_size=9,
+    view_behind=2,
+    hidden_sizes=(32, 32),
+    batch_size=64,
+    buffer_size=8_000,
+    learning_starts=200,
+    target_update_every=100,
+    learning_rate=1e-3,
+    epsilon_decay_episodes=16 * 4,
+    checkpoint_every=4,
+    seed=0,
 )
 
 

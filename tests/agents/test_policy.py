@@ -7,7 +7,12 @@ import pytest
 
 from worldagent.agents.networks import ActorCritic, QNetwork
 from worldagent.agents.policy import (
-    CallablePolicy, host_episode, load_policy, racing_driver_policy, save_policy, scripted_policy,
+    CallablePolicy,
+    host_episode,
+    load_policy,
+    racing_driver_policy,
+    save_policy,
+    scripted_policy,
 )
 from worldagent.envs.core import rollout
 from worldagent.envs.racing.env import episode_metrics
@@ -17,8 +22,9 @@ from worldagent.errors import WorldagentError
 def _saved(tmp_path, hidden=(16,)):
     net = ActorCritic(4, hidden)
     params = net.init(jax.random.key(0), jnp.zeros(260))
-    save_policy(tmp_path, net, params, kind="actor_critic", algorithm="ppo", env="racing", obs_shape=(260,), num_actions=4,
-                training={"total_episodes": 1})
+    save_policy(
+        tmp_path, net, params, kind="actor_critic", algorithm="ppo", env="racing", obs_shape=(260,), num_actions=4, training={"total_episodes": 1}
+    )
     return net, params
 
 

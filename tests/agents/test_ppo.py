@@ -12,7 +12,9 @@ from worldagent.envs.racing.env import episode_metrics
 from worldagent.errors import WorldagentError
 
 # The learning test's budget: a few dozen updates, a few seconds of training.
-LEARN = PPOConfig(total_episodes=900, num_envs=16, num_steps=64, num_minibatches=4, update_epochs=4, hidden=(32, 32), anneal_lr=False, learning_rate=3e-3)
+LEARN = PPOConfig(
+    total_episodes=900, num_envs=16, num_steps=64, num_minibatches=4, update_epochs=4, hidden=(32, 32), anneal_lr=False, learning_rate=3e-3
+)
 
 
 def _mean_returns(env, network, stacked_params, worlds, key):
@@ -50,14 +52,23 @@ def test_train_is_vmappable_and_stops_at_the_budget(racing_env, racing_pool, tin
     active = np.asarray(curves["active"]) > 0
     assert np.all(np.isnan(np.asarray(curves["return"])[~active]))  # updates after the budget are skipped
     np.testing.assert_array_equal(np.asarray(curves["episodes"])[:, -1][active[:, -1]], episodes[active[:, -1]])
-    assert not np.array_equal(np.asarray(states.params["params"]["actor"]["Dense_0"]["kernel"][0]),
-                              np.asarray(states.params["params"]["actor"]["Dense_0"]["kernel"][1]))
+    assert not np.array_equal(
+        np.asarray(states.params["params"]["actor"]["Dense_0"]["kernel"][0]), np.asarray(states.params["params"]["actor"]["Dense_0"]["kernel"][1])
+    )
 
 
-@pytest.mark.parametrize("field, value", [
-    ("total_episodes", 0), ("num_envs", -1), ("num_minibatches", 3), ("learning_rate", 0.0), ("gamma", 1.5),
-    ("activation", "gelu"), ("hidden", ()),
-])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("total_episodes", 0),
+        ("num_envs", -1),
+        ("num_minibatches", 3),
+        ("learning_rate", 0.0),
+        ("gamma", 1.5),
+        ("activation", "gelu"),
+        ("hidden", ()),
+    ],
+)
 def test_bad_configs_refused(field, value):
     with pytest.raises(WorldagentError, match=field):
         PPOConfig(**{field: value})

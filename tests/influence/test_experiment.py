@@ -25,8 +25,20 @@ RACING = ParticleRacing()
 RACING_PARAMS = RACING.default_params.replace(max_steps=60)  # short episodes keep the test fast
 TINY_PPO = PPOConfig(total_episodes=8, num_envs=4, num_steps=16, num_minibatches=2, update_epochs=1, hidden=(8,))
 SELECT = "crash_rate > 0.5 and progress > 0.005"  # a random driver crashes; some worlds let it get further
-TINY_DQN = DQNConfig(num_episodes=8, episode_length=40, num_envs=8, view_size=9, view_behind=2, hidden_sizes=(16,), batch_size=32,
-                     buffer_size=1000, learning_starts=50, target_update_every=20, epsilon_decay_episodes=4, checkpoint_every=1)
+TINY_DQN = DQNConfig(
+    num_episodes=8,
+    episode_length=40,
+    num_envs=8,
+    view_size=9,
+    view_behind=2,
+    hidden_sizes=(16,),
+    batch_size=32,
+    buffer_size=1000,
+    learning_starts=50,
+    target_update_every=20,
+    epsilon_decay_episodes=4,
+    checkpoint_every=1,
+)
 
 
 def random_driver() -> Policy:
@@ -34,8 +46,22 @@ def random_driver() -> Policy:
 
 
 def run_racing(run_dir, generator, selection=SELECT):
-    return influence(run_dir, "racing", random_driver(), generator, RACING_PARAMS, selection, algo="ppo", episodes=8, seeds=(0, 1),
-                     candidates=24, eval_worlds=8, repeats=2, config=TINY_PPO, progress=False)
+    return influence(
+        run_dir,
+        "racing",
+        random_driver(),
+        generator,
+        RACING_PARAMS,
+        selection,
+        algo="ppo",
+        episodes=8,
+        seeds=(0, 1),
+        candidates=24,
+        eval_worlds=8,
+        repeats=2,
+        config=TINY_PPO,
+        progress=False,
+    )
 
 
 def file_times(directory) -> dict:
@@ -143,8 +169,24 @@ def test_one_seed_has_no_interval_rather_than_a_zero_one():
 
 def test_harvest_with_a_search_for_more_worlds_and_figure_8(tmp_path, harvest_generator):
     params = make_params(can_tag=[True, False, False, False], max_steps=TINY_DQN.episode_length)
-    result = influence(tmp_path, "harvest", harvest_random_policy(), harvest_generator, params, "conflict == 0", algo="dqn", episodes=8,
-                       seeds=(0,), candidates=16, search_budget=12, eval_worlds=8, repeats=2, tagger=0, config=TINY_DQN, progress=False)
+    result = influence(
+        tmp_path,
+        "harvest",
+        harvest_random_policy(),
+        harvest_generator,
+        params,
+        "conflict == 0",
+        algo="dqn",
+        episodes=8,
+        seeds=(0,),
+        candidates=16,
+        search_budget=12,
+        eval_worlds=8,
+        repeats=2,
+        tagger=0,
+        config=TINY_DQN,
+        progress=False,
+    )
     assert result["worlds"]["campaigns"] == ["influence-candidates", "influence-search"]
     assert result["worlds"]["tried"] == 16 + 21  # CMA-ES evaluates whole generations of 21
     assert result["metrics"] == ["group_reward", "conflict", "equality"]

@@ -24,8 +24,9 @@ runner = CliRunner()
 )
 def test_a_bad_select_exits_2_with_one_line(tmp_path, select, message):
     # the generator does not exist: the selection must be refused before anything is loaded
-    result = runner.invoke(app, ["influence", "racing", "--agent", "driver", "--generator", str(tmp_path / "none"), "--select", select,
-                                 "--out", str(tmp_path / "run")])
+    result = runner.invoke(
+        app, ["influence", "racing", "--agent", "driver", "--generator", str(tmp_path / "none"), "--select", select, "--out", str(tmp_path / "run")]
+    )
     assert result.exit_code == 2, result.output
     assert "error:" in result.output and message in result.output
     assert len(result.output.strip().splitlines()) == 1
@@ -49,8 +50,31 @@ def test_a_whole_racing_run_prints_the_table_and_writes_figure_and_json(tmp_path
 
     gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
     out = tmp_path / "run"
-    args = ["influence", "racing", "--agent", "driver", "--generator", str(gen), "--select", "progress >= 0", "--algo", "ppo",
-            "--episodes", "4", "--seeds", "1", "--candidates", "8", "--eval-worlds", "4", "--repeats", "1", "--out", str(out), "--quiet"]
+    args = [
+        "influence",
+        "racing",
+        "--agent",
+        "driver",
+        "--generator",
+        str(gen),
+        "--select",
+        "progress >= 0",
+        "--algo",
+        "ppo",
+        "--episodes",
+        "4",
+        "--seeds",
+        "1",
+        "--candidates",
+        "8",
+        "--eval-worlds",
+        "4",
+        "--repeats",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "crash rate" in result.output and "± n/a" in result.output  # one seed: no interval

@@ -17,7 +17,9 @@ def evaluation(episodes: list[dict]) -> Evaluation:
 
 
 def racing_episodes(crashed, progress, ret=-100.0):
-    return [{"return": ret, "normalised_return": 0.5, "crashed": c, "lap_completed": 0, "progress": p, "steps": 10} for c, p in zip(crashed, progress)]
+    return [
+        {"return": ret, "normalised_return": 0.5, "crashed": c, "lap_completed": 0, "progress": p, "steps": 10} for c, p in zip(crashed, progress)
+    ]
 
 
 @pytest.mark.parametrize(
@@ -107,7 +109,9 @@ def harvest_store(tmp_path, conflicts: list[list[float]]) -> RunStore:
     campaign = store.open_campaign("influence-candidates", "harvest", "conflict", False, "random", len(conflicts), 0, {}, False)
     for slot, values in enumerate(conflicts):
         world = type(maps)(walls=maps.walls[slot], apples=maps.apples[slot])
-        episodes = [{"group_reward": 1.0, "conflict": c, "equality": 0.5, "sustainability": 3.0, "peace": 4.0, "returns": [1, 0, 0, 0]} for c in values]
+        episodes = [
+            {"group_reward": 1.0, "conflict": c, "equality": 0.5, "sustainability": 3.0, "peace": 4.0, "returns": [1, 0, 0, 0]} for c in values
+        ]
         store.add(campaign, 0, slot, np.full(3, slot, float), float(np.mean(values)), episodes, 0.0, world)
     return store, maps
 

@@ -41,8 +41,27 @@ def test_strategic_reuses_the_random_evaluation_and_draws_the_figure(tmp_path, g
 
 
 def test_compare_writes_the_figure_table_and_csv(tmp_path, generator_dir):
-    args = ["compare", "racing", "--agent", "driver", "--generator", str(generator_dir), "--out", str(tmp_path),
-            "--budget", "6", "--seeds", "2", "--optimisers", "cmaes,random", "--random-worlds", "20", "--repeats", "2", "--quiet"]
+    args = [
+        "compare",
+        "racing",
+        "--agent",
+        "driver",
+        "--generator",
+        str(generator_dir),
+        "--out",
+        str(tmp_path),
+        "--budget",
+        "6",
+        "--seeds",
+        "2",
+        "--optimisers",
+        "cmaes,random",
+        "--random-worlds",
+        "20",
+        "--repeats",
+        "2",
+        "--quiet",
+    ]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "| cmaes | 2 | 6 |" in result.output and "| random | 2 | 6 |" in result.output
@@ -72,5 +91,7 @@ def test_bad_input_is_a_one_line_error(tmp_path, generator_dir, args, message):
 
 
 def test_a_missing_generator_names_the_fix(tmp_path):
-    result = runner.invoke(app, ["strategic", "racing", "--agent", "driver", "--generator", str(tmp_path / "none"), "--out", str(tmp_path), "--quiet"])
+    result = runner.invoke(
+        app, ["strategic", "racing", "--agent", "driver", "--generator", str(tmp_path / "none"), "--out", str(tmp_path), "--quiet"]
+    )
     assert result.exit_code == 2 and "worldagent generator train" in result.output

@@ -14,8 +14,8 @@ from worldagent.reports.comparison import (
     comparison_figure,
     comparison_table_markdown,
     evaluations_to_reach,
-    tail_fraction,
     sample_efficiency,
+    tail_fraction,
 )
 
 RANDOM = np.arange(100.0)  # quantiles 0.1, 0.05, 0.01 -> 9.9, 4.95, 0.99 (linear interpolation)

@@ -25,4 +25,3 @@ def racing_copy(racing_run, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(racing_run[0], out)
     return out
-

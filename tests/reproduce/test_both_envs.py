@@ -23,6 +23,12 @@ def test_tiny_preset_runs_both_environments_from_the_command_line(tmp_path):
             assert manifest["phases"][f"{env}/{phase}"]["status"] == "done", (env, phase, manifest["phases"][f"{env}/{phase}"].get("error"))
     page = (out / "report.html").read_text()
     values = dict(re.findall(r'data-key="([^"]+)" data-value="([^"]+)"', page))
-    for key in ("racing.random.mean_normalised", "harvest.random.mean_normalised", "harvest.min.normalised", "harvest.max.normalised",
-                "harvest.influence.conflict_default", "harvest.influence.equality_influenced"):
+    for key in (
+        "racing.random.mean_normalised",
+        "harvest.random.mean_normalised",
+        "harvest.min.normalised",
+        "harvest.max.normalised",
+        "harvest.influence.conflict_default",
+        "harvest.influence.equality_influenced",
+    ):
         assert values[key] != "nan", key

@@ -11,8 +11,8 @@ import pytest
 from worldagent.errors import WorldagentError
 from worldagent.reproduce import phases as phases_module
 from worldagent.reproduce.manifest import Manifest
-from worldagent.reproduce.pipeline import forget_phases, reproduce
 from worldagent.reproduce.phases import EnvContext
+from worldagent.reproduce.pipeline import forget_phases, reproduce
 from worldagent.reproduce.presets import PHASES, TINY
 
 
@@ -24,8 +24,11 @@ def rows(store_path) -> dict[str, int]:
 
 def mtimes(root) -> dict[str, int]:
     """Modification times of every file under ``root`` but the report and the manifest."""
-    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in sorted(root.rglob("*"))
-            if p.is_file() and p.name not in ("report.html", "manifest.json") and "figures" not in p.parts and not p.name.endswith(("-wal", "-shm"))}
+    return {
+        str(p.relative_to(root)): p.stat().st_mtime_ns
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name not in ("report.html", "manifest.json") and "figures" not in p.parts and not p.name.endswith(("-wal", "-shm"))
+    }
 
 
 def test_every_phase_runs_and_is_recorded(racing_run):
@@ -39,8 +42,16 @@ def test_every_phase_runs_and_is_recorded(racing_run):
         assert entry["config"] == json.loads(json.dumps(TINY.phase_config("racing", phase)))
         assert entry["wall_s"] >= 0 and entry["finished"] >= entry["started"]
     assert manifest["phases"]["report"]["status"] == "done"
-    for path in ("racing/dataset.npz", "racing/generator/vae.msgpack", "racing/generator/quality.json", "racing/agent/policy/policy.json",
-                 "racing/store.sqlite", "racing/influence/influence.json", "racing/figures/strategic.png", "report.html"):
+    for path in (
+        "racing/dataset.npz",
+        "racing/generator/vae.msgpack",
+        "racing/generator/quality.json",
+        "racing/agent/policy/policy.json",
+        "racing/store.sqlite",
+        "racing/influence/influence.json",
+        "racing/figures/strategic.png",
+        "report.html",
+    ):
         assert (out / path).is_file(), path
     campaigns = rows(out / "racing" / "store.sqlite")
     assert campaigns["random-return-s0"] == TINY.racing.random_worlds
@@ -62,8 +73,10 @@ def test_a_killed_run_resumes_where_it_stopped(racing_copy, monkeypatch):
     store = racing_copy / "racing" / "store.sqlite"
     finished = rows(store)
     with sqlite3.connect(store) as db:  # the strategic phase was killed half-way through its max search
-        db.execute("DELETE FROM evaluations WHERE id IN (SELECT e.id FROM evaluations e JOIN campaigns c ON c.id = e.campaign_id "
-                   "WHERE c.name = 'cmaes-max-return-s0' ORDER BY e.id DESC LIMIT 10)")
+        db.execute(
+            "DELETE FROM evaluations WHERE id IN (SELECT e.id FROM evaluations e JOIN campaigns c ON c.id = e.campaign_id "
+            "WHERE c.name = 'cmaes-max-return-s0' ORDER BY e.id DESC LIMIT 10)"
+        )
     manifest = Manifest.open(racing_copy)
     manifest.start("racing/strategic", TINY.phase_config("racing", "strategic"))
 

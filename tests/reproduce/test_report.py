@@ -43,8 +43,13 @@ def expected_racing(out) -> dict[str, float]:
         "racing.random.crash_rate": np.mean([episode_mean(e, "crashed") for e in random]),
     }
     for label, found in (("min", low), ("max", high)):
-        values.update({f"racing.{label}.raw": found.score, f"racing.{label}.normalised": episode_mean(found, "normalised_return"),
-                       f"racing.{label}.crash_rate": episode_mean(found, "crashed")})
+        values.update(
+            {
+                f"racing.{label}.raw": found.score,
+                f"racing.{label}.normalised": episode_mean(found, "normalised_return"),
+                f"racing.{label}.crash_rate": episode_mean(found, "crashed"),
+            }
+        )
     summary = json.loads((out / "racing" / "influence" / "influence.json").read_text())["summary"]
     for which in ("default", "influenced"):
         values[f"racing.influence.crashed_{which}"] = summary["crashed"][which]["mean"]
@@ -128,14 +133,24 @@ def fake_evaluation(campaign: str, score: float, episodes: list[dict]):
 def test_harvest_reward_is_normalised_by_the_runs_best_episode():
     from worldagent.reports.html import headlines, normalised_means, world_summary
 
-    worlds = [fake_evaluation("random", 60.0, [{"group_reward": 40.0, "conflict": 0.5, "equality": 0.25}, {"group_reward": 80.0, "conflict": 0.0, "equality": 0.75}]),
-              fake_evaluation("random", 200.0, [{"group_reward": 200.0, "conflict": 0.0, "equality": 1.0}])]
+    worlds = [
+        fake_evaluation(
+            "random", 60.0, [{"group_reward": 40.0, "conflict": 0.5, "equality": 0.25}, {"group_reward": 80.0, "conflict": 0.0, "equality": 0.75}]
+        ),
+        fake_evaluation("random", 200.0, [{"group_reward": 200.0, "conflict": 0.0, "equality": 1.0}]),
+    ]
     assert np.allclose(normalised_means("harvest", worlds, 200.0), [0.3, 1.0])
     low = world_summary("harvest", worlds[0], 200.0)
     assert (low["raw"], low["normalised"], low["conflict"], low["equality"]) == (60.0, 0.3, 0.25, 0.5)
-    influence = {"summary": {"conflict": {"default": {"mean": 0.5}, "influenced": {"mean": 0.1}},
-                             "equality": {"default": {"mean": 0.3}, "influenced": {"mean": 0.8}}}}
-    rows = {row.key: row for row in headlines({"harvest": {"random": {"mean_normalised": 0.65, "mean_raw": 130.0}, "min": low, "influence": influence}})}
+    influence = {
+        "summary": {
+            "conflict": {"default": {"mean": 0.5}, "influenced": {"mean": 0.1}},
+            "equality": {"default": {"mean": 0.3}, "influenced": {"mean": 0.8}},
+        }
+    }
+    rows = {
+        row.key: row for row in headlines({"harvest": {"random": {"mean_normalised": 0.65, "mean_raw": 130.0}, "min": low, "influence": influence}})
+    }
     assert rows["harvest.random.mean_normalised"].ours == 0.65 and rows["harvest.random.mean_normalised"].paper == 0.61
     assert rows["harvest.min.normalised"].ours == 0.3 and rows["harvest.max.normalised"].ours is None
     assert (rows["harvest.influence.conflict_default"].ours, rows["harvest.influence.equality_influenced"].ours) == (0.5, 0.8)

@@ -72,7 +72,7 @@ class WorldPool:
     cdf: jax.Array
 
     @classmethod
-    def create(cls, worlds: Any, weights=None) -> "WorldPool":
+    def create(cls, worlds: Any, weights=None) -> WorldPool:
         """A pool of the N worlds in ``worlds`` (leading axis N), drawn by ``weights`` f[N] (default uniform)."""
         leaves = jax.tree_util.tree_leaves(worlds)
         if not leaves or np.ndim(leaves[0]) == 0:
@@ -82,7 +82,7 @@ class WorldPool:
             raise WorldagentError(f"worlds must all share one leading axis of size >= 1; got leaf shapes {[np.shape(x) for x in leaves]}.")
         probs = np.full(n, 1.0 / n) if weights is None else check_weights(weights, n)
         cdf = np.cumsum(probs)
-        cdf[np.flatnonzero(probs)[-1]:] = 1.0  # no rounding gap at the top; trailing zero weights stay unreachable
+        cdf[np.flatnonzero(probs)[-1] :] = 1.0  # no rounding gap at the top; trailing zero weights stay unreachable
         worlds = jax.tree_util.tree_map(jnp.asarray, worlds)
         return cls(worlds, jnp.asarray(probs, jnp.float32), jnp.asarray(cdf, jnp.float32))
 
@@ -138,7 +138,7 @@ WorldDistribution = WorldPool | LatentWorlds
 
 
 def env_name(env: Any) -> str:
-    """"racing" or "harvest" from a name or an Environment object."""
+    """ "racing" or "harvest" from a name or an Environment object."""
     if isinstance(env, str):
         name = env
     else:

@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -114,8 +115,16 @@ class DQNConfig:
 
     def validate(self) -> None:
         """Raise ``WorldagentError`` (one line, naming the fix) for impossible settings."""
-        positive = ("num_episodes", "episode_length", "num_envs", "batch_size", "buffer_size", "train_every",
-                    "target_update_every", "checkpoint_every")
+        positive = (
+            "num_episodes",
+            "episode_length",
+            "num_envs",
+            "batch_size",
+            "buffer_size",
+            "train_every",
+            "target_update_every",
+            "checkpoint_every",
+        )
         for name in positive:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -133,7 +142,9 @@ class DQNConfig:
         if not 0.0 <= self.epsilon_end <= self.epsilon_start <= 1.0 or self.epsilon_decay_episodes < 0:
             raise WorldagentError("exploration needs 0 <= epsilon_end <= epsilon_start <= 1 and epsilon_decay_episodes >= 0.")
         if self.learning_starts < 0 or self.buffer_size < 2 * self.num_envs:
-            raise WorldagentError(f"buffer_size ({self.buffer_size}) must hold at least two steps of {self.num_envs} envs and learning_starts be >= 0.")
+            raise WorldagentError(
+                f"buffer_size ({self.buffer_size}) must hold at least two steps of {self.num_envs} envs and learning_starts be >= 0."
+            )
         Harvest(view_size=self.view_size, view_behind=self.view_behind)  # checks the window
 
     @property
@@ -383,4 +394,3 @@ def check_algorithm(algo: str) -> str:
     if algo not in ALGORITHMS:
         raise WorldagentError(f"unknown harvest algorithm {algo!r}; use one of: {', '.join(ALGORITHMS)}.")
     return algo
-

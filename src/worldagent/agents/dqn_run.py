@@ -15,18 +15,20 @@ import functools
 import io
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from flax import serialization
 
-from worldagent.agents.dqn import DQNConfig, chunk_key, check_algorithm, make_act, make_trainer, q_network
+from worldagent.agents.dqn import DQNConfig, check_algorithm, chunk_key, make_act, make_trainer, q_network
 from worldagent.envs.core import rollout
 from worldagent.envs.harvest.env import NUM_ACTIONS, NUM_AGENTS
 from worldagent.errors import WorldagentError
 from worldagent.files import write_bytes
+
 
 class TrainResult(NamedTuple):
     """What ``train_harvest`` returns.
@@ -57,7 +59,9 @@ def config_from_dict(data: dict) -> DQNConfig:
     """Inverse of ``config_to_dict``; unknown fields are refused."""
     known = {f.name for f in dataclasses.fields(DQNConfig)}
     if not isinstance(data, dict) or set(data) - known:
-        raise WorldagentError(f"DQN config has unknown fields {sorted(set(data) - known) if isinstance(data, dict) else data!r}; it was saved by another version of worldagent.")
+        raise WorldagentError(
+            f"DQN config has unknown fields {sorted(set(data) - known) if isinstance(data, dict) else data!r}; it was saved by another version of worldagent."
+        )
     return DQNConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
@@ -80,9 +84,19 @@ def save_agents(directory, params: Any, config: DQNConfig, extra: dict | None = 
     the four Q-networks stacked on the agent axis, architecture "q_network", the run's config."""
     from worldagent.agents.policy import save_policy
 
-    return save_policy(directory, q_network(config), params, kind="q_network", algorithm="dqn", env="harvest",
-                       obs_shape=config.env().observation_shape, num_actions=NUM_ACTIONS, num_agents=NUM_AGENTS,
-                       training=config_to_dict(config), extra=extra)
+    return save_policy(
+        directory,
+        q_network(config),
+        params,
+        kind="q_network",
+        algorithm="dqn",
+        env="harvest",
+        obs_shape=config.env().observation_shape,
+        num_actions=NUM_ACTIONS,
+        num_agents=NUM_AGENTS,
+        training=config_to_dict(config),
+        extra=extra,
+    )
 
 
 def load_agents(directory, epsilon: float | None = None) -> tuple[Callable, Any, DQNConfig]:
@@ -97,7 +111,9 @@ def load_agents(directory, epsilon: float | None = None) -> tuple[Callable, Any,
     saved = load_policy(directory, env="harvest", algorithm="dqn")
     config = config_from_dict(saved.training)
     if saved.module != q_network(config) or saved.num_agents != NUM_AGENTS:
-        raise WorldagentError(f"{directory} holds a network of another architecture than its training config says; retrain it with `worldagent train harvest`.")
+        raise WorldagentError(
+            f"{directory} holds a network of another architecture than its training config says; retrain it with `worldagent train harvest`."
+        )
     return make_act(config, epsilon), saved.params, config
 
 
@@ -115,15 +131,34 @@ def json_dumps(data: Any) -> bytes:
     return (json.dumps(data, indent=1) + "\n").encode()
 
 
-CURVE_FIELDS = ("chunk", "episodes", "env_steps", "wall_s", "epsilon", "group_reward", "equality", "conflict",
-                "return_0", "return_1", "return_2", "return_3", "loss", "q")
+CURVE_FIELDS = (
+    "chunk",
+    "episodes",
+    "env_steps",
+    "wall_s",
+    "epsilon",
+    "group_reward",
+    "equality",
+    "conflict",
+    "return_0",
+    "return_1",
+    "return_2",
+    "return_3",
+    "loss",
+    "q",
+)
 
 
 def _history_row(config: DQNConfig, index: int, wall: float, stats: dict) -> dict:
     stats = jax.device_get(stats)
     returns = stats["returns"].mean(axis=0)
-    row = {"chunk": index + 1, "episodes": (index + 1) * config.num_envs, "env_steps": (index + 1) * config.num_envs * config.episode_length,
-           "wall_s": round(wall, 2), "epsilon": float(stats["epsilon"])}
+    row = {
+        "chunk": index + 1,
+        "episodes": (index + 1) * config.num_envs,
+        "env_steps": (index + 1) * config.num_envs * config.episode_length,
+        "wall_s": round(wall, 2),
+        "epsilon": float(stats["epsilon"]),
+    }
     for name in ("group_reward", "equality", "conflict"):
         row[name] = float(stats[name].mean())
     row.update({f"return_{i}": float(returns[i]) for i in range(NUM_AGENTS)})
@@ -182,7 +217,6 @@ def train_harvest(config: DQNConfig, distribution: Any, out_dir=None, progress: 
         ``TrainResult``.
     """
 
-
     from worldagent.progress import progress_bar
 
     check_algorithm(algo)
@@ -197,7 +231,9 @@ def train_harvest(config: DQNConfig, distribution: Any, out_dir=None, progress: 
         saved, wanted = json.loads((out / "config.json").read_text()), config_to_dict(config)
         if saved != wanted:
             changed = sorted(k for k in saved.keys() | wanted.keys() if saved.get(k) != wanted.get(k))
-            raise WorldagentError(f"{out} holds a run with other settings ({', '.join(changed)}); pass the same config, resume=False, or another out_dir.")
+            raise WorldagentError(
+                f"{out} holds a run with other settings ({', '.join(changed)}); pass the same config, resume=False, or another out_dir."
+            )
     trainer = make_trainer(config)
     key_init, key_chunks = jax.random.split(jax.random.key(config.seed))
     state = trainer.init(key_init, distribution)
@@ -214,8 +250,19 @@ def train_harvest(config: DQNConfig, distribution: Any, out_dir=None, progress: 
 
     def save_checkpoint(wall: float) -> None:
         write_bytes(out / "checkpoint.msgpack", serialization.to_bytes(jax.device_get(state)))
-        write_bytes(out / "checkpoint.json", json_dumps({"chunks_done": done, "wall_s": wall, "seed": config.seed, "versions": _versions(),
-                                                          "device": str(jax.devices()[0].device_kind), "history": history}))
+        write_bytes(
+            out / "checkpoint.json",
+            json_dumps(
+                {
+                    "chunks_done": done,
+                    "wall_s": wall,
+                    "seed": config.seed,
+                    "versions": _versions(),
+                    "device": str(jax.devices()[0].device_kind),
+                    "history": history,
+                }
+            ),
+        )
         write_curve(out, history, picture=done == config.num_chunks)
 
     resumed = done
@@ -232,7 +279,17 @@ def train_harvest(config: DQNConfig, distribution: Any, out_dir=None, progress: 
                 save_checkpoint(wall)
     wall = wall_before + time.perf_counter() - start
     if out is not None:
-        save_agents(out / "agents", state.params, config, extra={"act_epsilon": config.act_epsilon, "episodes": config.num_chunks * config.num_envs, "env_steps": config.num_chunks * config.num_envs * config.episode_length, "seed": config.seed})
+        save_agents(
+            out / "agents",
+            state.params,
+            config,
+            extra={
+                "act_epsilon": config.act_epsilon,
+                "episodes": config.num_chunks * config.num_envs,
+                "env_steps": config.num_chunks * config.num_envs * config.episode_length,
+                "seed": config.seed,
+            },
+        )
     env_steps = config.num_chunks * config.num_envs * config.episode_length
     return TrainResult(jax.device_get(state.params), config, history, wall, env_steps, resumed)
 

@@ -31,8 +31,9 @@ do not enter the trust-region estimate.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import flax.linen as nn
 import jax
@@ -150,7 +151,7 @@ class _Layer:
 
 
 def _layer_name(path: tuple[str, ...]) -> str:
-    """"actor/Dense_0" for module path ("actor", "Dense_0"); "" for a Dense model itself."""
+    """ "actor/Dense_0" for module path ("actor", "Dense_0"); "" for a Dense model itself."""
     return "/".join(path)
 
 

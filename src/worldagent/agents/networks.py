@@ -19,7 +19,7 @@ saved agent names its architecture instead of pickling it.
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import flax.linen as nn
 import jax

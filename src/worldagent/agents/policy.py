@@ -24,9 +24,10 @@ agent, e.g. a Stable-Baselines3 model) for host-loop evaluation (``host_episode`
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import flax.serialization
 import jax
@@ -232,8 +233,18 @@ def load_policy(directory: str | Path, env: str | None = None, greedy: bool = Fa
     # Q-network agents act as their trainer recorded (e.g. DQN's act_epsilon), unless asked to be greedy.
     epsilon = 0.0 if greedy else float(config.get("extra", {}).get("act_epsilon", 0.0))
     policy = network_policy(module, params, kind, greedy, num_agents, name=f"{config['algorithm']} {kind} ({directory.name})", epsilon=epsilon)
-    return SavedPolicy(policy, module, kind, config["algorithm"], config["env"], obs_shape, int(config["num_actions"]),
-                       num_agents, config.get("training", {}), config.get("extra", {}))
+    return SavedPolicy(
+        policy,
+        module,
+        kind,
+        config["algorithm"],
+        config["env"],
+        obs_shape,
+        int(config["num_actions"]),
+        num_agents,
+        config.get("training", {}),
+        config.get("extra", {}),
+    )
 
 
 def _restore_params(template: Any, state: Any, what: str) -> Any:
@@ -241,7 +252,9 @@ def _restore_params(template: Any, state: Any, what: str) -> Any:
     try:
         params = flax.serialization.from_state_dict(template, state)
     except (ValueError, KeyError, TypeError) as error:
-        raise WorldagentError(f"{what} does not fit the recorded architecture ({str(error).splitlines()[0][:120]}); it is from another network.") from None
+        raise WorldagentError(
+            f"{what} does not fit the recorded architecture ({str(error).splitlines()[0][:120]}); it is from another network."
+        ) from None
     _check_params_match(params, template, what)
     return jax.tree_util.tree_map(jnp.asarray, params)
 
@@ -253,7 +266,9 @@ def _check_params_match(params: Any, template: Any, what: str) -> None:
         raise WorldagentError(f"{what} have a different layer structure than the architecture; they are from another network.")
     for leaf, spec in zip(jax.tree_util.tree_leaves(params), jax.tree_util.tree_leaves(template)):
         if np.shape(leaf) != spec.shape:
-            raise WorldagentError(f"{what} hold a layer of shape {np.shape(leaf)} where the architecture has {spec.shape}; they are from another network.")
+            raise WorldagentError(
+                f"{what} hold a layer of shape {np.shape(leaf)} where the architecture has {spec.shape}; they are from another network."
+            )
 
 
 # -- scripted reference policies ----------------------------------------------------------------

@@ -19,8 +19,9 @@ updates that did not run (``curve["active"]`` is False there).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -29,7 +30,13 @@ from flax import struct
 
 from worldagent.agents.networks import ActorCritic
 from worldagent.agents.rollouts import (
-    EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner,
+    EnvRunner,
+    action_log_prob,
+    collect,
+    entropy,
+    episode_summary,
+    gae,
+    init_runner,
 )
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
@@ -160,8 +167,21 @@ class Trainer(NamedTuple):
     done: Callable
 
 
-CURVE_FIELDS = ("active", "episodes", "env_steps", "return", "length", "crashed", "lap_completed", "progress",
-                "policy_loss", "value_loss", "entropy", "approx_kl", "learning_rate")
+CURVE_FIELDS = (
+    "active",
+    "episodes",
+    "env_steps",
+    "return",
+    "length",
+    "crashed",
+    "lap_completed",
+    "progress",
+    "policy_loss",
+    "value_loss",
+    "entropy",
+    "approx_kl",
+    "learning_rate",
+)
 
 
 def raw_key(key: jax.Array) -> jax.Array:
@@ -179,8 +199,7 @@ def max_updates(total_episodes: int, num_envs: int, num_steps: int, max_episode_
     return math.ceil(math.ceil(total_episodes / num_envs) * max_episode_steps / num_steps) + 1
 
 
-
-def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budget: int, network: Any) -> "Trainer":
+def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budget: int, network: Any) -> Trainer:
     """A ``Trainer`` from ``init(key) -> state`` and ``update(state) -> (state, curve row)``.
 
     Updates run in jitted chunks (``lax.scan``); once ``total_episodes`` episodes have ended the
@@ -205,6 +224,7 @@ def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budg
 
     return Trainer(init, train_chunk, train, network, budget, done)
 
+
 def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
     """PPO on ``env`` with each episode's world drawn from ``distribution``.
 
@@ -223,7 +243,11 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
     if getattr(env, "num_agents", 1) != 1:
         raise WorldagentError("PPO here trains single-agent envs (racing); use the independent DQN for harvest.")
     env_params = training_params(env_params, config.respawn)
-    network = ActorCritic(env.num_actions, config.hidden, config.activation, )
+    network = ActorCritic(
+        env.num_actions,
+        config.hidden,
+        config.activation,
+    )
     tx = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam(eps=1e-5))
     batch = config.num_envs * config.num_steps
     minibatch = batch // config.num_minibatches
@@ -256,9 +280,7 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
 
     def update(state: TrainState) -> tuple[TrainState, dict]:
         key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
-        runner, traj, (last_value, _) = collect(
-            key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps
-        )
+        runner, traj, (last_value, _) = collect(key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps)
         rewards = traj.reward * config.reward_scale
         advantages, targets = gae(rewards, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
         flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731

@@ -21,7 +21,8 @@ convention; the racing observation has no clock, so a time-limit value would be 
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -178,9 +179,7 @@ def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[j
         advantage = delta + gamma * lam * not_done * advantage
         return (advantage, value), advantage
 
-    _, advantages = jax.lax.scan(
-        backward, (jnp.zeros_like(last_value), last_value), (rewards, values, dones), reverse=True
-    )
+    _, advantages = jax.lax.scan(backward, (jnp.zeros_like(last_value), last_value), (rewards, values, dones), reverse=True)
     return advantages, advantages + values
 
 

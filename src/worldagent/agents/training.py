@@ -18,9 +18,10 @@ from __future__ import annotations
 import csv
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import flax.serialization
 import jax
@@ -193,8 +194,15 @@ def train_racing(
     env_params = env.default_params if env_params is None else env_params
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    run = {"algorithm": algo, "env": "racing", "seed": int(seed), "config": config.to_dict(), "distribution": distribution_spec,
-           "versions": _versions(), "device": str(jax.devices()[0].device_kind)}
+    run = {
+        "algorithm": algo,
+        "env": "racing",
+        "seed": int(seed),
+        "config": config.to_dict(),
+        "distribution": distribution_spec,
+        "versions": _versions(),
+        "device": str(jax.devices()[0].device_kind),
+    }
     trainer = algorithm.make_train(config, env, env_params, distribution)
     state = trainer.init(jax.random.key(seed))
     rows: list[dict] = []
@@ -213,7 +221,9 @@ def train_racing(
         try:
             state = flax.serialization.from_bytes(state, checkpoint.read_bytes())
         except Exception:  # corrupt or foreign msgpack
-            raise WorldagentError(f"checkpoint {checkpoint} is corrupted or from another architecture; start afresh with resume=False (--no-resume).") from None
+            raise WorldagentError(
+                f"checkpoint {checkpoint} is corrupted or from another architecture; start afresh with resume=False (--no-resume)."
+            ) from None
         rows = _read_curve(out_dir / CURVE_FILE)
         rows = [r for r in rows if r["update"] <= int(state.update)]
         resumed_from = int(state.update)
@@ -238,16 +248,32 @@ def train_racing(
             write_bytes(checkpoint, flax.serialization.to_bytes(jax.device_get(state)))
             _write_curve(out_dir / CURVE_FILE, rows)
             last = rows[-1] if rows else {}
-            advance(min(int(state.episodes), total) - min(before, total),
-                    ret=last.get("return", float("nan")), crash=last.get("crashed", float("nan")), lap=last.get("lap_completed", float("nan")))
+            advance(
+                min(int(state.episodes), total) - min(before, total),
+                ret=last.get("return", float("nan")),
+                crash=last.get("crashed", float("nan")),
+                lap=last.get("lap_completed", float("nan")),
+            )
     wall = time.perf_counter() - start
     if rows:
         plot_curve(rows, out_dir / "curve.png")
     save_policy(
-        out_dir / "policy", trainer.network, state.params, kind=algorithm.network_kind, algorithm=algo, env="racing",
-        obs_shape=env.observation_shape, num_actions=env.num_actions, training=config.to_dict(),
-        extra={"seed": int(seed), "episodes": int(state.episodes), "env_steps": int(state.env_steps), "updates": int(state.update),
-               "distribution": distribution_spec},
+        out_dir / "policy",
+        trainer.network,
+        state.params,
+        kind=algorithm.network_kind,
+        algorithm=algo,
+        env="racing",
+        obs_shape=env.observation_shape,
+        num_actions=env.num_actions,
+        training=config.to_dict(),
+        extra={
+            "seed": int(seed),
+            "episodes": int(state.episodes),
+            "env_steps": int(state.env_steps),
+            "updates": int(state.update),
+            "distribution": distribution_spec,
+        },
     )
     agent = load_policy(out_dir / "policy", env="racing")
     curve_arrays = {k: np.array([r[k] for r in rows]) for k in ["update", "wall_seconds", *ppo.CURVE_FIELDS]}

@@ -33,7 +33,6 @@ def friendly_errors(command):
     return wrapper
 
 
-
 def env_and_params(env: str, tagger: list[int]):
     """The env object and its params; harvest agents listed in ``tagger`` may TAG (§6.2.2)."""
     if env == "racing":
@@ -82,5 +81,3 @@ def campaign(env, agent, generator, objective, maximize, optimiser, budget, repe
 
 
 AGENT_HELP = "A `worldagent train` run directory (or the agent directory in it), or a scripted policy: driver (racing), random or greedy (harvest)."
-
-

@@ -88,8 +88,23 @@ def influence_command(
     policy = agent_policy(env, agent, greedy)
     G, _, _ = load_generator(generator)
     result = influence(
-        out, env, policy, G, params, selection, algo=algo, episodes=episodes, seeds=tuple(range(seeds)), candidates=candidates,
-        search_budget=search_budget, eval_worlds=eval_worlds, repeats=repeats, tagger=tagger, progress=not quiet, seed=seed, greedy=greedy,
+        out,
+        env,
+        policy,
+        G,
+        params,
+        selection,
+        algo=algo,
+        episodes=episodes,
+        seeds=tuple(range(seeds)),
+        candidates=candidates,
+        search_budget=search_budget,
+        eval_worlds=eval_worlds,
+        repeats=repeats,
+        tagger=tagger,
+        progress=not quiet,
+        seed=seed,
+        greedy=greedy,
     )
     worlds, _, values = load_influenced_worlds(out, env)
     picks = example_indices(values, 4)

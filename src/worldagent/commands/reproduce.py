@@ -23,13 +23,20 @@ def register(app: typer.Typer) -> None:
         preset: str = typer.Option("quick", "--preset", help="quick (about 15 min on 2 CPU cores), paper (the paper's budgets; a GPU) or tiny (CI)."),
         env: str = typer.Option("all", "--env", help="racing, harvest or all."),
         out: Path = typer.Option(None, "--out", help="Run directory (default runs/PRESET); a rerun skips finished phases, a killed run resumes."),
-        algo: str = typer.Option(None, "--algo", help="Racing agents: ppo (the default: it learnt to lap for 3 seeds of 3) or acktr (the paper's; 1 of 3)."),
-        restart: list[str] = typer.Option([], "--restart", help="Redo this phase (and what depends on it): dataset, generator, agent, random, strategic, compare, influence. Repeatable."),
+        algo: str = typer.Option(
+            None, "--algo", help="Racing agents: ppo (the default: it learnt to lap for 3 seeds of 3) or acktr (the paper's; 1 of 3)."
+        ),
+        restart: list[str] = typer.Option(
+            [],
+            "--restart",
+            help="Redo this phase (and what depends on it): dataset, generator, agent, random, strategic, compare, influence. Repeatable.",
+        ),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
     ) -> None:
         """Run the paper end to end: datasets, generators, agents, random and strategic evaluation, ES vs BO, influencing; then the HTML report."""
-        from worldagent.reproduce.pipeline import reproduce as run, resolve_envs
+        from worldagent.reproduce.pipeline import reproduce as run
+        from worldagent.reproduce.pipeline import resolve_envs
         from worldagent.reproduce.presets import get_preset
 
         chosen = get_preset(preset).with_algo(algo)

@@ -41,7 +41,7 @@ def _check_counts(**counts: int) -> None:
 
 
 def _crash_note(evaluation) -> str:
-    """", 8/8 episodes crashed" for a racing evaluation."""
+    """ ", 8/8 episodes crashed" for a racing evaluation."""
     crashed = sum(bool(e.get("crashed")) for e in evaluation.episodes)
     return f", {crashed}/{len(evaluation.episodes)} episodes crashed"
 
@@ -76,10 +76,16 @@ def register(app: typer.Typer) -> None:
         _check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
         env_obj, params, policy, G, metric = _setup(env, agent, generator, metric, tagger, greedy)
         with RunStore(out) as store:
-            randoms = random_evaluation(store, env, env_obj, policy, G, params, metric, worlds=random_worlds, repeats=repeats, seed=seed, progress=not quiet)
-            found = strategic_evaluation(store, env, env_obj, policy, G, params, metric, budget=budget, repeats=repeats, seed=seed, optimiser=optimiser, progress=not quiet)
+            randoms = random_evaluation(
+                store, env, env_obj, policy, G, params, metric, worlds=random_worlds, repeats=repeats, seed=seed, progress=not quiet
+            )
+            found = strategic_evaluation(
+                store, env, env_obj, policy, G, params, metric, budget=budget, repeats=repeats, seed=seed, optimiser=optimiser, progress=not quiet
+            )
         scores = np.array([e.score for e in randoms])
-        figure = strategic_figure(env, env_obj, policy, params, found["min"], found["max"], scores, metric, out / f"strategic-{metric}-s{seed}.png", key=found["keys"])
+        figure = strategic_figure(
+            env, env_obj, policy, params, found["min"], found["max"], scores, metric, out / f"strategic-{metric}-s{seed}.png", key=found["keys"]
+        )
         low, high = found["min"], found["max"]
         crashes = (_crash_note(low), _crash_note(high)) if env == "racing" else ("", "")
         console.print(
@@ -99,7 +105,9 @@ def register(app: typer.Typer) -> None:
         minimize: bool = typer.Option(True, "--minimize/--maximize", help="Direction (the paper's Figure 7 minimises reward)."),
         metric: str = typer.Option("reward", "--metric", help=METRIC_HELP),
         random_worlds: int = typer.Option(1000, "--random-worlds", help="Random worlds for the reference distribution."),
-        random_seed: int = typer.Option(1000, "--random-seed", help="Seed of the reference random worlds (not one of the optimisers' seeds, so random search never replays them)."),
+        random_seed: int = typer.Option(
+            1000, "--random-seed", help="Seed of the reference random worlds (not one of the optimisers' seeds, so random search never replays them)."
+        ),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         out: Path = typer.Option(Path("runs/compare"), "--out", help="Run directory: store.sqlite, comparison.png/.md/.csv."),
         tagger: list[int] = typer.Option([], "--tagger", help="Harvest: an agent allowed to TAG (repeatable)."),
@@ -126,10 +134,23 @@ def register(app: typer.Typer) -> None:
         env_obj, params, policy, G, metric = _setup(env, agent, generator, metric, tagger, greedy)
         maximize = not minimize
         with RunStore(out) as store:
-            randoms = random_evaluation(store, env, env_obj, policy, G, params, metric, worlds=random_worlds, repeats=repeats, seed=random_seed, progress=not quiet)
+            randoms = random_evaluation(
+                store, env, env_obj, policy, G, params, metric, worlds=random_worlds, repeats=repeats, seed=random_seed, progress=not quiet
+            )
             runs = compare_optimisers(
-                store, env, env_obj, policy, G, params, metric, maximize=maximize, optimisers=tuple(names), budget=budget,
-                seeds=tuple(range(seeds)), repeats=repeats, progress=not quiet,
+                store,
+                env,
+                env_obj,
+                policy,
+                G,
+                params,
+                metric,
+                maximize=maximize,
+                optimisers=tuple(names),
+                budget=budget,
+                seeds=tuple(range(seeds)),
+                repeats=repeats,
+                progress=not quiet,
             )
         random_scores = np.array([e.score for e in randoms])
         rows = sample_efficiency(runs, random_scores, maximize=maximize)

@@ -71,9 +71,7 @@ class ParticleRacingGym(gymnasium.Env):
         if self._state is None:
             raise RuntimeError("call reset() before step().")
         action = check_actions(action, self.env.num_actions)
-        obs, self._state, reward, terminated, truncated, info = self._step(
-            jax.random.key(0), self._state, np.int32(action), self.params
-        )
+        obs, self._state, reward, terminated, truncated, info = self._step(jax.random.key(0), self._state, np.int32(action), self.params)
         self._trail.append(np.asarray(self._state.position))
         info = {name: np.asarray(value).item() for name, value in info.items()}
         return np.asarray(obs), float(reward), bool(terminated), bool(truncated), info

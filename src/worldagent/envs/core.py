@@ -141,7 +141,5 @@ def rollout(env: Environment, policy, key: jax.Array, world: Any, params: Any, n
         record = {"state": next_state.replace(world=None), "action": action, "reward": reward, "alive": ~done}
         return (next_obs, next_state, next_done), record
 
-    (_, final_state, _), trajectory = jax.lax.scan(
-        one_step, (obs, state, jnp.bool_(False)), jax.random.split(key_steps, num_steps)
-    )
+    (_, final_state, _), trajectory = jax.lax.scan(one_step, (obs, state, jnp.bool_(False)), jax.random.split(key_steps, num_steps))
     return final_state, trajectory

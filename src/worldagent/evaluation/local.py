@@ -62,7 +62,16 @@ def episode_keys(key: jax.Array, worlds: int, repeats: int) -> jax.Array:
     return jax.random.split(key, (worlds, repeats))
 
 
-def evaluate(env: Environment, policy, worlds: Any, repeats: int, key: jax.Array, params: Any = None, num_steps: int | None = None, keys: jax.Array | None = None) -> dict[str, np.ndarray]:
+def evaluate(
+    env: Environment,
+    policy,
+    worlds: Any,
+    repeats: int,
+    key: jax.Array,
+    params: Any = None,
+    num_steps: int | None = None,
+    keys: jax.Array | None = None,
+) -> dict[str, np.ndarray]:
     """Roll ``policy`` out ``repeats`` times on each of the B ``worlds`` (a batched world pytree).
 
     Args:
@@ -95,7 +104,9 @@ def evaluate(env: Environment, policy, worlds: Any, repeats: int, key: jax.Array
     return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in chunks[0]}
 
 
-def evaluate_host(env: Environment, policy, worlds: Any, repeats: int, key: jax.Array, params: Any = None, num_steps: int | None = None) -> dict[str, np.ndarray]:
+def evaluate_host(
+    env: Environment, policy, worlds: Any, repeats: int, key: jax.Array, params: Any = None, num_steps: int | None = None
+) -> dict[str, np.ndarray]:
     """``evaluate`` for an external policy called from Python (slow; same output)."""
     from worldagent.agents.policy import host_episode
 
@@ -105,7 +116,9 @@ def evaluate_host(env: Environment, policy, worlds: Any, repeats: int, key: jax.
     rows = []
     for b in range(count):
         world = jax.tree_util.tree_map(lambda leaf: leaf[b], worlds)
-        episodes = [jax.tree_util.tree_map(np.asarray, env.metrics(host_episode(env, policy, keys[b, r], world, params, num_steps))) for r in range(repeats)]
+        episodes = [
+            jax.tree_util.tree_map(np.asarray, env.metrics(host_episode(env, policy, keys[b, r], world, params, num_steps))) for r in range(repeats)
+        ]
         rows.append({name: np.stack([e[name] for e in episodes]) for name in episodes[0]})
     return {name: np.stack([row[name] for row in rows]) for name in rows[0]}
 

@@ -20,8 +20,9 @@ import dataclasses
 import hashlib
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import jax
 import numpy as np
@@ -246,8 +247,8 @@ def load_influenced_worlds(run_dir: str | Path, env_name: str) -> tuple[Any, np.
     if not path.is_file():
         raise WorldagentError(f"{path} does not exist; run `worldagent influence` into {run_dir} first.")
     with np.load(path, allow_pickle=False) as data:
-        world = {k[len("world_"):]: data[k] for k in data.files if k.startswith("world_")}
-        values = {k[len("value_"):]: data[k] for k in data.files if k.startswith("value_")}
+        world = {k[len("world_") :]: data[k] for k in data.files if k.startswith("world_")}
+        values = {k[len("value_") :]: data[k] for k in data.files if k.startswith("value_")}
         latents = data["latents"]
     fields = [f.name for f in dataclasses.fields(world_type(env_name))]
     if sorted(world) != sorted(fields):
@@ -275,7 +276,9 @@ def evaluate_campaign(store, spec, objective, env, policy, G, params, repeats: i
     return run_campaign(store, spec, evaluate, resume=True, progress=progress)
 
 
-def train_agent(out: Path, env_name: str, algo: str, config: Any, distribution: Any, seed: int, env: Any, params: Any, spec: str, progress: bool) -> dict:
+def train_agent(
+    out: Path, env_name: str, algo: str, config: Any, distribution: Any, seed: int, env: Any, params: Any, spec: str, progress: bool
+) -> dict:
     """Train one agent into ``out`` (resuming its checkpoint), or return the record of a finished one.
 
     A finished agent is marked by ``trained.json`` (written after the trainer returns), so a
@@ -287,14 +290,21 @@ def train_agent(out: Path, env_name: str, algo: str, config: Any, distribution: 
     if env_name == "racing":
         from worldagent.agents.training import train_racing
 
-        result = train_racing(config, distribution, out, algo, seed=seed, env=env, env_params=params, progress=progress, resume=True, distribution_spec=spec)
+        result = train_racing(
+            config, distribution, out, algo, seed=seed, env=env, env_params=params, progress=progress, resume=True, distribution_spec=spec
+        )
         record = {"policy": "policy", "episodes": result.episodes, "env_steps": result.env_steps, "wall_seconds": round(result.wall_seconds, 3)}
     else:
         from worldagent.agents.dqn_run import train_harvest
 
         run_config = dataclasses.replace(config, seed=int(seed))
         result = train_harvest(run_config, distribution, out, progress=progress, resume=True)
-        record = {"policy": "agents", "episodes": run_config.num_chunks * run_config.num_envs, "env_steps": result.env_steps, "wall_seconds": round(result.wall_s, 3)}
+        record = {
+            "policy": "agents",
+            "episodes": run_config.num_chunks * run_config.num_envs,
+            "env_steps": result.env_steps,
+            "wall_seconds": round(result.wall_s, 3),
+        }
     write_text(marker, json.dumps({**record, "seed": int(seed), "distribution": spec}, indent=1))
     return json.loads(marker.read_text())
 
@@ -418,18 +428,29 @@ def influence(
     env = env if env is not None else _default_env(env_name, config)
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    check_plan(run_dir, "worlds", {
-        "env": env_name, "candidates": int(candidates), "search_budget": int(search_budget), "repeats": int(repeats), "seed": int(seed),
-        "search": search_target(selection) if search_budget > 0 else None,
-        "agent": fingerprint(agent_policy, getattr(agent_policy, "name", "")),
-        "generator": fingerprint(G, f"{G.env} {getattr(G, 'apples', 0)}"), "params": fingerprint(params),
-    })
+    check_plan(
+        run_dir,
+        "worlds",
+        {
+            "env": env_name,
+            "candidates": int(candidates),
+            "search_budget": int(search_budget),
+            "repeats": int(repeats),
+            "seed": int(seed),
+            "search": search_target(selection) if search_budget > 0 else None,
+            "agent": fingerprint(agent_policy, getattr(agent_policy, "name", "")),
+            "generator": fingerprint(G, f"{G.env} {getattr(G, 'apples', 0)}"),
+            "params": fingerprint(params),
+        },
+    )
     metric = selection.metrics[0]
     timings: dict[str, Any] = {}
     with RunStore(run_dir) as store:
         # (a) candidate worlds: random G(z), then optionally a search for more with the property
         clock = time.perf_counter()
-        random_spec = CampaignSpec(CANDIDATES, env_name, metric, True, "random", int(candidates), int(seed), G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH))
+        random_spec = CampaignSpec(
+            CANDIDATES, env_name, metric, True, "random", int(candidates), int(seed), G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH)
+        )
         tried = evaluate_campaign(store, random_spec, Objective(env_name, metric, True), env, agent_policy, G, params, repeats, True, progress)
         timings["candidates"] = time.perf_counter() - clock
         campaigns = [CANDIDATES]
@@ -437,15 +458,19 @@ def influence(
             clock = time.perf_counter()
             maximize = search_direction(selection, selection.world_means(tried)[metric])
             search_spec = CampaignSpec(SEARCH, env_name, metric, maximize, "cmaes", int(search_budget), int(seed), G.latent_dim)
-            tried = tried + evaluate_campaign(store, search_spec, Objective(env_name, metric, maximize), env, agent_policy, G, params, repeats, True, progress)
+            tried = tried + evaluate_campaign(
+                store, search_spec, Objective(env_name, metric, maximize), env, agent_policy, G, params, repeats, True, progress
+            )
             campaigns.append(SEARCH)
             timings["search"] = time.perf_counter() - clock
         # (b) the influenced distribution: the matching worlds, uniformly
         worlds, latents, values = select_worlds(store, campaigns, selection, env_name)
         check_plan(run_dir, "training", {"selection": selection.describe(), "algo": algo, "training": config_dict(config), "greedy": bool(greedy)})
         save_influenced_worlds(run_dir / WORLDS_FILE, worlds, latents, values)
-        distributions = {"default": (LatentWorlds(G), "G(z), z ~ N(0, I)"),
-                         "influenced": (WorldPool.create(worlds), f"{len(latents)} worlds with {selection.describe()}")}
+        distributions = {
+            "default": (LatentWorlds(G), "G(z), z ~ N(0, I)"),
+            "influenced": (WorldPool.create(worlds), f"{len(latents)} worlds with {selection.describe()}"),
+        }
         # (c) one default and one influenced agent per seed, same algorithm, budget and seed
         agents, agent_dirs, timings["train"] = {}, {}, {}
         for s in seeds:
@@ -459,7 +484,9 @@ def influence(
         # (d) every agent on the same random worlds, with the same episode keys
         clock = time.perf_counter()
         reward = metric_name(env_name, "reward")
-        eval_spec = CampaignSpec("", env_name, reward, True, "random", int(eval_worlds), int(seed) + 1, G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH))
+        eval_spec = CampaignSpec(
+            "", env_name, reward, True, "random", int(eval_worlds), int(seed) + 1, G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH)
+        )
         compared = COMPARED[env_name]
         per_seed: dict[str, dict[str, dict[str, float]]] = {label: {} for label in LABELS}
         for name, policy in trained_policies(agent_dirs, env_name, greedy).items():
@@ -474,11 +501,24 @@ def influence(
         "env": env_name,
         "algo": algo,
         "selection": {"text": selection.text, "describe": selection.describe(), "metrics": list(selection.metrics)},
-        "config": {"episodes": episodes, "seeds": seeds, "candidates": int(candidates), "search_budget": int(search_budget),
-                   "eval_worlds": int(eval_worlds), "repeats": int(repeats), "tagger": tagger, "seed": int(seed), "greedy": bool(greedy),
-                   "training": config_dict(config)},
-        "worlds": {"tried": len(tried), "selected": int(len(latents)), "campaigns": campaigns,
-                   "selected_values": {m: {"min": float(v.min()), "mean": float(v.mean()), "max": float(v.max())} for m, v in values.items()}},
+        "config": {
+            "episodes": episodes,
+            "seeds": seeds,
+            "candidates": int(candidates),
+            "search_budget": int(search_budget),
+            "eval_worlds": int(eval_worlds),
+            "repeats": int(repeats),
+            "tagger": tagger,
+            "seed": int(seed),
+            "greedy": bool(greedy),
+            "training": config_dict(config),
+        },
+        "worlds": {
+            "tried": len(tried),
+            "selected": int(len(latents)),
+            "campaigns": campaigns,
+            "selected_values": {m: {"min": float(v.min()), "mean": float(v.mean()), "max": float(v.max())} for m, v in values.items()},
+        },
         "metrics": list(compared),
         "per_seed": per_seed,
         "summary": summarise(per_seed, compared),
@@ -493,7 +533,12 @@ def influence(
 def _check_counts(seeds: list[int], candidates: int, search_budget: int, eval_worlds: int, repeats: int) -> None:
     if not seeds or any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
         raise WorldagentError(f"seeds={seeds}; pass one or more distinct non-negative seeds.")
-    for name, value, least in (("candidates", candidates, 1), ("search_budget", search_budget, 0), ("eval_worlds", eval_worlds, 1), ("repeats", repeats, 1)):
+    for name, value, least in (
+        ("candidates", candidates, 1),
+        ("search_budget", search_budget, 0),
+        ("eval_worlds", eval_worlds, 1),
+        ("repeats", repeats, 1),
+    ):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
             raise WorldagentError(f"{name}={value!r}; pass an integer of at least {least}.")
 

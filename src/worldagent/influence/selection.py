@@ -20,8 +20,8 @@ k/8) are not lost to float rounding.
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Sequence
 
 import numpy as np
 
@@ -63,9 +63,12 @@ class Clause:
         values = np.asarray(values, np.float64)
         close = np.isclose(values, self.number, rtol=EQUALITY_TOLERANCE, atol=EQUALITY_TOLERANCE)
         result = {
-            "<": values < self.number, "<=": (values <= self.number) | close,
-            ">": values > self.number, ">=": (values >= self.number) | close,
-            "==": close, "!=": ~close,
+            "<": values < self.number,
+            "<=": (values <= self.number) | close,
+            ">": values > self.number,
+            ">=": (values >= self.number) | close,
+            "==": close,
+            "!=": ~close,
         }[self.op]
         return result & np.isfinite(values)
 
@@ -93,7 +96,7 @@ class Selection:
         """The distinct metrics the selection reads, in order (resolved names)."""
         return tuple(dict.fromkeys(clause.metric or clause.name for clause in self.clauses))
 
-    def resolve(self, env: str) -> "Selection":
+    def resolve(self, env: str) -> Selection:
         """The same selection with every name resolved for ``env`` (refuses other envs' metrics)."""
         return replace(self, clauses=tuple(_clause(c.name, c.op, c.number, env) for c in self.clauses), env=env)
 
@@ -114,7 +117,7 @@ class Selection:
             keep &= clause.holds(world_means(evaluations, clause.metric))
         return keep
 
-    def _for(self, evaluations: Sequence) -> "Selection":
+    def _for(self, evaluations: Sequence) -> Selection:
         """Resolved for the env whose metrics the evaluations hold (unless already resolved)."""
         if self.env is not None or all(c.metric is not None for c in self.clauses):
             return self
@@ -174,7 +177,9 @@ def _tokens(text: str) -> list[tuple[str, str, int]]:
         value = match.group(kind)
         start = match.start(kind)
         if kind == "other":
-            raise WorldagentError(f"unexpected {value!r} at character {start + 1} of the selection; write METRIC OP NUMBER joined by 'and', {EXAMPLE}.")
+            raise WorldagentError(
+                f"unexpected {value!r} at character {start + 1} of the selection; write METRIC OP NUMBER joined by 'and', {EXAMPLE}."
+            )
         tokens.append((kind, value, start))
         position = match.end()
     return tokens
@@ -209,7 +214,7 @@ def parse_selection(text: str, env: str | None = None) -> Selection:
         if not (kind == "name" and value.lower() == "and"):
             raise WorldagentError(f"unexpected {value!r} at character {start + 1} after '{clause.describe()}'; join clauses with 'and', {EXAMPLE}.")
         if i + 1 == len(tokens):
-            raise WorldagentError(f"the selection ends with 'and'; add another METRIC OP NUMBER clause or remove it.")
+            raise WorldagentError("the selection ends with 'and'; add another METRIC OP NUMBER clause or remove it.")
         i += 1
 
 

@@ -14,8 +14,8 @@ as ``search.experiments.compare_optimisers`` returns it.
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -55,7 +55,9 @@ def best_so_far(scores: np.ndarray, maximize: bool) -> np.ndarray:
     return np.maximum.accumulate(filled) if maximize else np.minimum.accumulate(filled)
 
 
-def sample_efficiency(runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, quantiles: Sequence[float] = QUANTILES, maximize: bool = False) -> list[dict]:
+def sample_efficiency(
+    runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, quantiles: Sequence[float] = QUANTILES, maximize: bool = False
+) -> list[dict]:
     """One row per optimiser: evaluations to reach the random distribution's tail quantiles.
 
     Args:
@@ -101,11 +103,11 @@ def sample_efficiency(runs: dict[str, list[np.ndarray]], random_scores: np.ndarr
 
 def _quantiles_of(rows: list[dict]) -> list[str]:
     """The quantile labels ("0.1", ...) the rows were computed for, in order."""
-    return [key[len("median_q"):] for key in rows[0] if key.startswith("median_q")] if rows else []
+    return [key[len("median_q") :] for key in rows[0] if key.startswith("median_q")] if rows else []
 
 
 def _reach_cell(row: dict, q: str) -> str:
-    """"12 (1 never)" — the median count and how many seeds never reached the target."""
+    """ "12 (1 never)" — the median count and how many seeds never reached the target."""
     median, never, seeds = row[f"median_q{q}"], row[f"never_q{q}"], row["seeds"]
     text = "not reached" if median is None else f"{median:g}"
     return f"{text} ({never}/{seeds} never)" if never else text
@@ -117,11 +119,25 @@ def comparison_table_markdown(rows: list[dict], metric: str = "score", maximize:
         raise WorldagentError("no rows to tabulate; compute sample_efficiency first.")
     labels = _quantiles_of(rows)
     sign = "≥" if maximize else "≤"
-    head = ["optimiser", "seeds", "worlds/seed", *[f"worlds to {sign} q{q} ({rows[0][f'threshold_q{q}']:.4g})" for q in labels], f"best {metric} (mean ± sd)", f"mean {metric} sampled"]
+    head = [
+        "optimiser",
+        "seeds",
+        "worlds/seed",
+        *[f"worlds to {sign} q{q} ({rows[0][f'threshold_q{q}']:.4g})" for q in labels],
+        f"best {metric} (mean ± sd)",
+        f"mean {metric} sampled",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for row in rows:
         sd = "" if np.isnan(row["best_sd"]) else f" ± {row['best_sd']:.3g}"
-        cells = [row["optimiser"], str(row["seeds"]), str(row["evaluations"]), *[_reach_cell(row, q) for q in labels], f"{row['best_mean']:.4g}{sd}", f"{row['mean_sampled']:.4g}"]
+        cells = [
+            row["optimiser"],
+            str(row["seeds"]),
+            str(row["evaluations"]),
+            *[_reach_cell(row, q) for q in labels],
+            f"{row['best_mean']:.4g}{sd}",
+            f"{row['mean_sampled']:.4g}",
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     tail = "lower" if not maximize else "upper"
     expected = ", ".join(f"q{q}: {1 / float(q):g}" for q in labels)
@@ -197,19 +213,40 @@ def _distribution_panel(axis, pooled: dict[str, np.ndarray], random_scores: np.n
         if below or above:
             notes.append(f"{label}: {below} below {low:.3g}" + (f", {above} above {high:.3g}" if above else ""))
     inside = lambda v: v[(v >= low) & (v <= high)]  # noqa: E731
-    axis.hist(inside(random_scores), bins=edges, weights=np.full(len(inside(random_scores)), 1 / len(random_scores)), color="0.55", alpha=0.6,
-              label=f"random worlds (n={len(random_scores)}, mean {random_scores.mean():.3g})")
+    axis.hist(
+        inside(random_scores),
+        bins=edges,
+        weights=np.full(len(inside(random_scores)), 1 / len(random_scores)),
+        color="0.55",
+        alpha=0.6,
+        label=f"random worlds (n={len(random_scores)}, mean {random_scores.mean():.3g})",
+    )
     for i, (name, values) in enumerate(pooled.items()):
-        axis.hist(inside(values), bins=edges, weights=np.full(len(inside(values)), 1 / len(values)), histtype="step", linewidth=2, color=colours(i),
-                  label=f"{name} (n={len(values)}, mean {values.mean():.3g})")
+        axis.hist(
+            inside(values),
+            bins=edges,
+            weights=np.full(len(inside(values)), 1 / len(values)),
+            histtype="step",
+            linewidth=2,
+            color=colours(i),
+            label=f"{name} (n={len(values)}, mean {values.mean():.3g})",
+        )
     axis.set_xlim(low, high)
     axis.set_xlabel(metric)
     axis.set_ylabel("share of the worlds")
     axis.set_title(f"worlds sampled while {'maximising' if maximize else 'minimising'} {metric}")
     axis.legend(fontsize=8, loc="upper right" if not maximize else "upper left")
     if notes:
-        axis.text(0.02 if not maximize else 0.98, 0.97, "beyond the axis:\n" + "\n".join(notes), transform=axis.transAxes, fontsize=7,
-                  va="top", ha="left" if not maximize else "right", bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "0.7"})
+        axis.text(
+            0.02 if not maximize else 0.98,
+            0.97,
+            "beyond the axis:\n" + "\n".join(notes),
+            transform=axis.transAxes,
+            fontsize=7,
+            va="top",
+            ha="left" if not maximize else "right",
+            bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "0.7"},
+        )
 
 
 def _best_so_far_panel(axis, runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, maximize: bool, colours) -> None:
@@ -251,7 +288,9 @@ def _best_so_far_panel(axis, runs: dict[str, list[np.ndarray]], random_scores: n
     axis.legend(fontsize=8, loc="upper right")
 
 
-def comparison_figure(runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, out: Path | str, maximize: bool = False, bins: int = 40) -> Path:
+def comparison_figure(
+    runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, out: Path | str, maximize: bool = False, bins: int = 40
+) -> Path:
     """Figure 7 and a best-so-far curve, side by side, to PNG.
 
     Left: the distribution of the scores of every world each optimiser sampled (all seeds

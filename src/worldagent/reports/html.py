@@ -86,8 +86,13 @@ def best_evaluation(evaluations, maximize: bool):
 
 def world_summary(env: str, evaluation, scale: float) -> dict:
     """Raw score, normalised score and (racing) crash rate of one evaluated world."""
-    summary = {"raw": float(evaluation.score), "normalised": float(normalised_means(env, [evaluation], scale)[0]),
-               "campaign": evaluation.campaign, "generation": evaluation.generation, "slot": evaluation.slot}
+    summary = {
+        "raw": float(evaluation.score),
+        "normalised": float(normalised_means(env, [evaluation], scale)[0]),
+        "campaign": evaluation.campaign,
+        "generation": evaluation.generation,
+        "slot": evaluation.slot,
+    }
     if env == "racing":
         summary["crash_rate"] = float(world_means([evaluation], "crashed")[0])
     else:
@@ -122,13 +127,20 @@ def store_results(env: str, store, done: dict) -> dict:
     if done["random"].get("status") == "done":
         evaluations = store.evaluations(done["random"]["outputs"]["campaign"])
         normalised = normalised_means(env, evaluations, scale)
-        random = {"campaign": done["random"]["outputs"]["campaign"], "worlds": len(evaluations),
-                  "scores": np.array([e.score for e in evaluations]), "normalised": normalised,
-                  "mean_raw": float(np.nanmean([e.score for e in evaluations])), "mean_normalised": float(np.nanmean(normalised))}
+        random = {
+            "campaign": done["random"]["outputs"]["campaign"],
+            "worlds": len(evaluations),
+            "scores": np.array([e.score for e in evaluations]),
+            "normalised": normalised,
+            "mean_raw": float(np.nanmean([e.score for e in evaluations])),
+            "mean_normalised": float(np.nanmean(normalised)),
+        }
         if env == "racing":
             random["crash_rate"] = float(np.nanmean(world_means(evaluations, "crashed")))
         else:
-            random.update(conflict=float(np.nanmean(world_means(evaluations, "conflict"))), equality=float(np.nanmean(world_means(evaluations, "equality"))))
+            random.update(
+                conflict=float(np.nanmean(world_means(evaluations, "conflict"))), equality=float(np.nanmean(world_means(evaluations, "equality")))
+            )
         out["random"] = random
     if done["strategic"].get("status") == "done":
         low_name, high_name = done["strategic"]["outputs"]["campaigns"]
@@ -141,8 +153,10 @@ def store_results(env: str, store, done: dict) -> dict:
     if compare.get("status") == "done" and "campaigns" in compare.get("outputs", {}) and "random" in out:
         config = compare["config"]
         budget = {opt: config.get("bo_budget", config["budget"]) if opt == "bo" else config["budget"] for opt in compare["outputs"]["campaigns"]}
-        runs = {opt: [np.array([e.score for e in store.evaluations(name)[: budget[opt]]], np.float64) for name in names]
-                for opt, names in compare["outputs"]["campaigns"].items()}
+        runs = {
+            opt: [np.array([e.score for e in store.evaluations(name)[: budget[opt]]], np.float64) for name in names]
+            for opt, names in compare["outputs"]["campaigns"].items()
+        }
         out["compare"] = {"runs": runs}
     return out
 
@@ -162,14 +176,27 @@ def headlines(results: dict[str, dict]) -> list[Headline]:
     rows += [
         Headline("racing.random.mean_normalised", "Racing: random worlds, mean reward (normalised)", pick(racing, "random", "mean_normalised"), 0.87),
         Headline("racing.random.mean_raw", "Racing: random worlds, mean return (raw)", pick(racing, "random", "mean_raw"), None),
-        Headline("racing.random.crash_rate", "Racing: random worlds, crash rate", pick(racing, "random", "crash_rate"), 0.11, "paper: default training, Fig. 8a"),
+        Headline(
+            "racing.random.crash_rate",
+            "Racing: random worlds, crash rate",
+            pick(racing, "random", "crash_rate"),
+            0.11,
+            "paper: default training, Fig. 8a",
+        ),
         Headline("racing.min.normalised", "Racing: minimising world, reward (normalised)", pick(racing, "min", "normalised"), 0.13),
         Headline("racing.min.raw", "Racing: minimising world, return (raw)", pick(racing, "min", "raw"), None),
-        Headline("racing.min.crash_rate", "Racing: minimising world, crash rate", pick(racing, "min", "crash_rate"), None, "paper: 'consistently crashes'"),
+        Headline(
+            "racing.min.crash_rate", "Racing: minimising world, crash rate", pick(racing, "min", "crash_rate"), None, "paper: 'consistently crashes'"
+        ),
         Headline("racing.max.normalised", "Racing: maximising world, reward (normalised)", pick(racing, "max", "normalised"), 0.99),
         Headline("racing.max.raw", "Racing: maximising world, return (raw)", pick(racing, "max", "raw"), None),
         Headline("racing.max.crash_rate", "Racing: maximising world, crash rate", pick(racing, "max", "crash_rate"), 0.0, "paper: 'never crashes'"),
-        Headline("harvest.random.mean_normalised", "Harvest: random worlds, mean group reward (normalised)", pick(harvest, "random", "mean_normalised"), 0.61),
+        Headline(
+            "harvest.random.mean_normalised",
+            "Harvest: random worlds, mean group reward (normalised)",
+            pick(harvest, "random", "mean_normalised"),
+            0.61,
+        ),
         Headline("harvest.random.mean_raw", "Harvest: random worlds, mean group reward (raw)", pick(harvest, "random", "mean_raw"), None),
         Headline("harvest.min.normalised", "Harvest: minimising world, group reward (normalised)", pick(harvest, "min", "normalised"), 0.05),
         Headline("harvest.min.raw", "Harvest: minimising world, group reward (raw)", pick(harvest, "min", "raw"), None),
@@ -194,8 +221,14 @@ def influence_headlines(env: str, result: dict | None, metrics) -> list[Headline
         summary = (result or {}).get("summary", {}).get(metric, {})
         for which, paper in (("default", paper_default), ("influenced", paper_influenced)):
             value = summary.get(which, {}).get("mean")
-            rows.append(Headline(f"{env}.influence.{metric}_{which}", f"{env.capitalize()} influence: {label}, {which} training",
-                                 None if value is None else float(value), paper))
+            rows.append(
+                Headline(
+                    f"{env}.influence.{metric}_{which}",
+                    f"{env.capitalize()} influence: {label}, {which} training",
+                    None if value is None else float(value),
+                    paper,
+                )
+            )
     return rows
 
 
@@ -276,17 +309,37 @@ def section(anchor: str, title: str, body: str) -> str:
 
 def overview(manifest: dict, run_dir: Path) -> str:
     """Preset, seeds, versions, device, and each phase's status and wall time."""
-    rows = [["preset", manifest.get("preset", "?")], ["seed", manifest.get("seed", "?")], ["environments", ", ".join(manifest.get("envs", []))],
-            ["device", manifest.get("device", "?")], ["run directory", str(run_dir)]]
+    rows = [
+        ["preset", manifest.get("preset", "?")],
+        ["seed", manifest.get("seed", "?")],
+        ["environments", ", ".join(manifest.get("envs", []))],
+        ["device", manifest.get("device", "?")],
+        ["run directory", str(run_dir)],
+    ]
     rows += [[f"version: {name}", version] for name, version in manifest.get("versions", {}).items()]
     entries = {key: entry for key, entry in manifest.get("phases", {}).items() if key != "report"}  # this report is being built
-    phases = [[key, entry.get("status", "?"), fmt(entry.get("wall_s")), _time(entry.get("started")), _time(entry.get("finished")),
-               json.dumps(entry.get("config", {}), sort_keys=True), entry.get("error") or entry.get("outputs", {}).get("summary", "")]
-              for key, entry in entries.items()]
+    phases = [
+        [
+            key,
+            entry.get("status", "?"),
+            fmt(entry.get("wall_s")),
+            _time(entry.get("started")),
+            _time(entry.get("finished")),
+            json.dumps(entry.get("config", {}), sort_keys=True),
+            entry.get("error") or entry.get("outputs", {}).get("summary", ""),
+        ]
+        for key, entry in entries.items()
+    ]
     total = sum(entry.get("wall_s") or 0.0 for entry in entries.values())
-    return (table(["", ""], rows) + "<h3>Phases</h3>" + table(["phase", "status", "wall s", "started", "finished", "config", "result"], phases)
-            + f"<p>Total wall time of the phases: {total:,.1f} s.</p>"
-            + "<h3>Preset</h3><pre>" + esc(json.dumps(manifest.get("config", {}), indent=1)) + "</pre>")
+    return (
+        table(["", ""], rows)
+        + "<h3>Phases</h3>"
+        + table(["phase", "status", "wall s", "started", "finished", "config", "result"], phases)
+        + f"<p>Total wall time of the phases: {total:,.1f} s.</p>"
+        + "<h3>Preset</h3><pre>"
+        + esc(json.dumps(manifest.get("config", {}), indent=1))
+        + "</pre>"
+    )
 
 
 def _time(stamp: float | None) -> str:
@@ -316,13 +369,17 @@ def generator_section(run_dir: Path, results: dict) -> str:
     def render(env: str, res: dict) -> str:
         quality = res["quality"]
         recon = quality["reconstruction"]
-        rows = [["reconstruction: cell accuracy (VAE / mean image)", f"{fmt(recon['vae']['accuracy'])} / {fmt(recon['mean_image']['accuracy'])}"],
-                ["reconstruction: on-cell IoU (VAE / mean image)", f"{fmt(recon['vae']['iou'])} / {fmt(recon['mean_image']['iou'])}"],
-                ["held-out worlds", fmt(recon["worlds"])], ["training epochs", fmt(quality["training"]["epochs"])],
-                ["final held-out loss", fmt(quality["training"]["final"]["holdout_loss"])]]
+        rows = [
+            ["reconstruction: cell accuracy (VAE / mean image)", f"{fmt(recon['vae']['accuracy'])} / {fmt(recon['mean_image']['accuracy'])}"],
+            ["reconstruction: on-cell IoU (VAE / mean image)", f"{fmt(recon['vae']['iou'])} / {fmt(recon['mean_image']['iou'])}"],
+            ["held-out worlds", fmt(recon["worlds"])],
+            ["training epochs", fmt(quality["training"]["epochs"])],
+            ["final held-out loss", fmt(quality["training"]["final"]["holdout_loss"])],
+        ]
         rows += [[name.replace("_", " "), fmt(value)] for name, value in quality.get(env, {}).items()]
-        return (table(["measure", "value"], rows)
-                + image(run_dir / env / "figures" / "generator_traversals.png", f"{env}: latent traversals of G(z) (one row per latent dimension)"))
+        return table(["measure", "value"], rows) + image(
+            run_dir / env / "figures" / "generator_traversals.png", f"{env}: latent traversals of G(z) (one row per latent dimension)"
+        )
 
     return per_env(results, "generator", render, "quality", "no quality.json")
 
@@ -330,8 +387,12 @@ def generator_section(run_dir: Path, results: dict) -> str:
 def training_section(run_dir: Path, results: dict) -> str:
     def render(env: str, res: dict) -> str:
         outputs = res["phases"]["agent"]["outputs"]
-        rows = [["algorithm", outputs.get("algo")], ["episodes", fmt(outputs.get("episodes"))], ["env steps", fmt(outputs.get("env_steps"))],
-                ["training s", fmt(outputs.get("train_s"))]] + [[f"last: {k}", fmt(v)] for k, v in outputs.get("final", {}).items()]
+        rows = [
+            ["algorithm", outputs.get("algo")],
+            ["episodes", fmt(outputs.get("episodes"))],
+            ["env steps", fmt(outputs.get("env_steps"))],
+            ["training s", fmt(outputs.get("train_s"))],
+        ] + [[f"last: {k}", fmt(v)] for k, v in outputs.get("final", {}).items()]
         return table(["", ""], rows) + image(run_dir / outputs["curve"], f"{env}: learning curve")
 
     return per_env(results, "agent", render)
@@ -342,14 +403,21 @@ def random_section(run_dir: Path, results: dict) -> str:
 
     def render(env: str, res: dict) -> str:
         random = res["random"]
-        rows = [[f"<td>worlds x episodes</td><td class='num'>{random['worlds']} x {res['phases']['random']['config']['repeats']}</td>"],
-                ["<td>mean reward (raw)</td>" + number(f"{env}.random.mean_raw", random["mean_raw"])],
-                ["<td>mean reward (normalised)</td>" + number(f"{env}.random.mean_normalised", random["mean_normalised"])]]
+        rows = [
+            [f"<td>worlds x episodes</td><td class='num'>{random['worlds']} x {res['phases']['random']['config']['repeats']}</td>"],
+            ["<td>mean reward (raw)</td>" + number(f"{env}.random.mean_raw", random["mean_raw"])],
+            ["<td>mean reward (normalised)</td>" + number(f"{env}.random.mean_normalised", random["mean_normalised"])],
+        ]
         rows += [[f"<td>mean {name.replace('_', ' ')}</td>" + number(f"{env}.random.{name}", random[name])] for name in EXTRA_METRICS[env]]
-        figure = distribution_figure({"random worlds": random["normalised"]}, f"{res['metric']} (normalised)", run_dir / env / "figures" / "random.png",
-                                     f"{env}: reward over {random['worlds']} random worlds")
-        return (table(["", "value"], rows, raw_cells=True)
-                + image(figure, f"{env}: distribution of the normalised reward over random worlds (cf. Figure 6a)"))
+        figure = distribution_figure(
+            {"random worlds": random["normalised"]},
+            f"{res['metric']} (normalised)",
+            run_dir / env / "figures" / "random.png",
+            f"{env}: reward over {random['worlds']} random worlds",
+        )
+        return table(["", "value"], rows, raw_cells=True) + image(
+            figure, f"{env}: distribution of the normalised reward over random worlds (cf. Figure 6a)"
+        )
 
     return per_env(results, "random", render, "random", "no random campaign in the store")
 
@@ -360,12 +428,19 @@ def strategic_section(run_dir: Path, results: dict) -> str:
         rows = []
         for label in ("min", "max"):
             found = res[label]
-            rows.append([f"<td>{label}imising world ({esc(found['campaign'])}, generation {found['generation']}, slot {found['slot']}; "
-                         f"{found['evaluated']} worlds searched)</td>", number(f"{env}.{label}.raw", found["raw"]),
-                         number(f"{env}.{label}.normalised", found["normalised"]),
-                         *[number(f"{env}.{label}.{name}", found[name]) for name in extra]])
-        return (table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True)
-                + image(run_dir / env / "figures" / "strategic.png", f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)"))
+            rows.append(
+                [
+                    f"<td>{label}imising world ({esc(found['campaign'])}, generation {found['generation']}, slot {found['slot']}; "
+                    f"{found['evaluated']} worlds searched)</td>",
+                    number(f"{env}.{label}.raw", found["raw"]),
+                    number(f"{env}.{label}.normalised", found["normalised"]),
+                    *[number(f"{env}.{label}.{name}", found[name]) for name in extra],
+                ]
+            )
+        return table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True) + image(
+            run_dir / env / "figures" / "strategic.png",
+            f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)",
+        )
 
     return per_env(results, "strategic", render, "min", "no strategic campaigns in the store")
 
@@ -381,7 +456,7 @@ def comparison_section(run_dir: Path, results: dict) -> str:
             return missing("no comparison campaigns in the store")
         runs, random = res["compare"]["runs"], res["random"]["scores"]
         rows = sample_efficiency(runs, random, maximize=False)
-        quantiles = [k[len("median_q"):] for k in rows[0] if k.startswith("median_q")]
+        quantiles = [k[len("median_q") :] for k in rows[0] if k.startswith("median_q")]
         body = []
         for row in rows:
             opt = row["optimiser"]
@@ -390,13 +465,21 @@ def comparison_section(run_dir: Path, results: dict) -> str:
                 cells.append(number(f"{env}.compare.{opt}.median_q{q}", row[f"median_q{q}"], 4, f" ({row[f'never_q{q}']}/{row['seeds']} never)"))
             cells += [number(f"{env}.compare.{opt}.best_mean", row["best_mean"]), number(f"{env}.compare.{opt}.mean_sampled", row["mean_sampled"])]
             body.append(cells)
-        head = ["optimiser", "seeds", "worlds/seed", *[f"worlds to reach random q{q} (≤ {fmt(rows[0][f'threshold_q{q}'])})" for q in quantiles],
-                f"best {res['metric']} (mean over seeds)", f"mean {res['metric']} sampled"]
+        head = [
+            "optimiser",
+            "seeds",
+            "worlds/seed",
+            *[f"worlds to reach random q{q} (≤ {fmt(rows[0][f'threshold_q{q}'])})" for q in quantiles],
+            f"best {res['metric']} (mean over seeds)",
+            f"mean {res['metric']} sampled",
+        ]
         figure = comparison_figure(runs, random, res["metric"], run_dir / env / "figures" / "comparison.png", maximize=False)
-        return (table(head, body, raw_cells=True)
-                + "<p>Worlds each optimiser evaluated (median over seeds) before its first world scoring at or below the random "
-                  "distribution's q-quantile; random sampling needs 1/q on average.</p>"
-                + image(figure, f"{env}: rewards of the worlds each optimiser sampled while minimising reward, against random worlds (cf. Figure 7)"))
+        return (
+            table(head, body, raw_cells=True)
+            + "<p>Worlds each optimiser evaluated (median over seeds) before its first world scoring at or below the random "
+            "distribution's q-quantile; random sampling needs 1/q on average.</p>"
+            + image(figure, f"{env}: rewards of the worlds each optimiser sampled while minimising reward, against random worlds (cf. Figure 7)")
+        )
 
     return per_env(results, "compare", render)
 
@@ -407,24 +490,43 @@ def influence_section(run_dir: Path, results: dict) -> str:
         worlds = result["worlds"]
         rows = []
         for metric, by_label in result["summary"].items():
-            rows.append([f"<td>{esc(metric)}</td>"] + [number(f"{env}.influence.{metric}_{label}", by_label[label]["mean"]) +
-                                                        f"<td class='num'>{fmt(by_label[label]['ci95'], 3)}</td>" for label in ("default", "influenced")])
-        return (f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
-                f"became the influenced training distribution; agents trained with seeds {esc(result['config']['seeds'])}, "
-                f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
-                + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)
-                + image(run_dir / env / "figures" / "influence.png", f"{env}: default against influenced training, with worlds of the influenced distribution (cf. Figure 8)"))
+            rows.append(
+                [f"<td>{esc(metric)}</td>"]
+                + [
+                    number(f"{env}.influence.{metric}_{label}", by_label[label]["mean"]) + f"<td class='num'>{fmt(by_label[label]['ci95'], 3)}</td>"
+                    for label in ("default", "influenced")
+                ]
+            )
+        return (
+            f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
+            f"became the influenced training distribution; agents trained with seeds {esc(result['config']['seeds'])}, "
+            f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
+            + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)
+            + image(
+                run_dir / env / "figures" / "influence.png",
+                f"{env}: default against influenced training, with worlds of the influenced distribution (cf. Figure 8)",
+            )
+        )
 
     return per_env(results, "influence", render, "influence", "no influence.json")
 
 
 def headline_section(rows: list[Headline]) -> str:
-    body = [[f"<td>{esc(row.label)}</td>", number(row.key, row.ours), f"<td class='num'>{'–' if row.paper is None else fmt(row.paper)}</td>",
-             f"<td>{esc(row.note)}</td>"] for row in rows]
-    return (table(["quantity", "ours", "paper", "note"], body, raw_cells=True)
-            + "<p>Ours are recomputed from the run stores when the report is built (n/a: the phase has not run; –: the paper gives no number). "
-              "Normalised: racing by the return's rule-given range, harvest by the run's best single-episode group reward "
-              "(see the module docstring of <code>worldagent.reports.html</code>).</p>")
+    body = [
+        [
+            f"<td>{esc(row.label)}</td>",
+            number(row.key, row.ours),
+            f"<td class='num'>{'–' if row.paper is None else fmt(row.paper)}</td>",
+            f"<td>{esc(row.note)}</td>",
+        ]
+        for row in rows
+    ]
+    return (
+        table(["quantity", "ours", "paper", "note"], body, raw_cells=True)
+        + "<p>Ours are recomputed from the run stores when the report is built (n/a: the phase has not run; –: the paper gives no number). "
+        "Normalised: racing by the return's rule-given range, harvest by the run's best single-episode group reward "
+        "(see the module docstring of <code>worldagent.reports.html</code>).</p>"
+    )
 
 
 # -- the report -------------------------------------------------------------------------------
@@ -459,7 +561,11 @@ def build_report(run_dir: Path | str) -> Path:
     }
     nav = "<nav>" + "".join(f'<a href="#{anchor}">{esc(title)}</a>' for anchor, title in SECTIONS) + "</nav>"
     title = f"worldagent reproduce: {manifest.get('preset', '?')} ({', '.join(envs)})"
-    page = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{esc(title)}</title><style>{CSS}</style></head><body>"
-            f"<h1>{esc(title)}</h1><p>Optimising Worlds to Evaluate and Influence Reinforcement Learning Agents, reproduced end to end.</p>"
-            + nav + "".join(section(anchor, heading, bodies[anchor]) for anchor, heading in SECTIONS) + "</body></html>\n")
+    page = (
+        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{esc(title)}</title><style>{CSS}</style></head><body>"
+        f"<h1>{esc(title)}</h1><p>Optimising Worlds to Evaluate and Influence Reinforcement Learning Agents, reproduced end to end.</p>"
+        + nav
+        + "".join(section(anchor, heading, bodies[anchor]) for anchor, heading in SECTIONS)
+        + "</body></html>\n"
+    )
     return write_text(run_dir / REPORT_FILE, page)

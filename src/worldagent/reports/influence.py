@@ -83,8 +83,13 @@ def influence_figure(result: dict, example_worlds: Any, env_name: str, out: Path
     for i, metric in enumerate(metrics):
         axis = figure.add_subplot(grid[:, i])
         entries = [summary[metric][label] for label in labels]
-        axis.bar(range(len(labels)), [e["mean"] for e in entries], yerr=[_interval(e) for e in entries], capsize=4,
-                 color=[COLOURS[label] for label in labels])
+        axis.bar(
+            range(len(labels)),
+            [e["mean"] for e in entries],
+            yerr=[_interval(e) for e in entries],
+            capsize=4,
+            color=[COLOURS[label] for label in labels],
+        )
         axis.set_xticks(range(len(labels)), [label.capitalize() for label in labels], rotation=30, fontsize=8)
         axis.set_title(metric_label(metric), fontsize=9)
         means = [e["mean"] for e in entries]

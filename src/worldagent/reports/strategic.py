@@ -49,7 +49,7 @@ def drawn_scores(env_name: str, episodes: Episodes, metric: str, params: Any) ->
 
 
 def ending_summary(episodes: Episodes) -> str:
-    """"8 episodes: 6 crashed (steps 41–57), 2 lapped" — how racing episodes ended."""
+    """ "8 episodes: 6 crashed (steps 41–57), 2 lapped" — how racing episodes ended."""
     endings = np.array(episodes.endings())
     parts = []
     for kind, verb in (("crash", "crashed"), ("lap", "lapped"), ("timeout", "timed out")):
@@ -74,7 +74,9 @@ def _draw_racing(axis, world, episodes: Episodes, plt) -> None:
     crashed = [episodes.path(e)[-1] for e, ending in enumerate(episodes.endings()) if ending == "crash"]
     if crashed:
         points = np.array(crashed)
-        axis.scatter(points[:, 0], points[:, 1], marker="X", s=110, color=(0.9, 0.1, 0.1), edgecolors="white", linewidths=1.2, zorder=5, label="crash")
+        axis.scatter(
+            points[:, 0], points[:, 1], marker="X", s=110, color=(0.9, 0.1, 0.1), edgecolors="white", linewidths=1.2, zorder=5, label="crash"
+        )
     centreline = np.asarray(world.centreline)
     start, ahead = centreline[0], centreline[min(6, len(centreline) - 1)]
     axis.scatter([start[0]], [start[1]], marker="o", s=45, color="white", edgecolors="black", zorder=6, label="start")
@@ -162,7 +164,7 @@ def _world_panel(axis, env_name, env, policy, params, evaluation: Evaluation, ke
 
 
 def _normalised_note(env_name: str, metric: str, evaluation: Evaluation) -> str:
-    """" (normalised 0.13)" for racing returns, the scale the paper reports (§6)."""
+    """ " (normalised 0.13)" for racing returns, the scale the paper reports (§6)."""
     if env_name != "racing" or metric != "return" or not evaluation.episodes:
         return ""
     values = [e.get("normalised_return") for e in evaluation.episodes]
@@ -229,7 +231,9 @@ def _zoom_inset(axis, scores: np.ndarray, bulk: np.ndarray, marks) -> None:
     inset.tick_params(labelsize=6)
 
 
-def strategic_figure(env_name: str, env, policy, params, low: Evaluation, high: Evaluation, random_scores, metric: str, out: Path | str, key: Any = None) -> Path:
+def strategic_figure(
+    env_name: str, env, policy, params, low: Evaluation, high: Evaluation, random_scores, metric: str, out: Path | str, key: Any = None
+) -> Path:
     """Draw the minimising and maximising worlds and their scores against random ones, to PNG.
 
     Args:

@@ -38,8 +38,14 @@ def versions() -> dict:
 
     import worldagent
 
-    return {"worldagent": worldagent.__version__, "jax": jax.__version__, "flax": flax.__version__, "optax": optax.__version__,
-            "numpy": numpy.__version__, "python": platform.python_version()}
+    return {
+        "worldagent": worldagent.__version__,
+        "jax": jax.__version__,
+        "flax": flax.__version__,
+        "optax": optax.__version__,
+        "numpy": numpy.__version__,
+        "python": platform.python_version(),
+    }
 
 
 def device() -> str:
@@ -68,7 +74,7 @@ class Manifest:
         self.data = data
 
     @classmethod
-    def open(cls, run_dir: Path | str) -> "Manifest":
+    def open(cls, run_dir: Path | str) -> Manifest:
         """Read ``run_dir/manifest.json``, or start an empty one (not yet written)."""
         run_dir = Path(run_dir)
         path = run_dir / MANIFEST_FILE
@@ -83,7 +89,7 @@ class Manifest:
         return cls(run_dir, data)
 
     @classmethod
-    def read(cls, run_dir: Path | str) -> "Manifest":
+    def read(cls, run_dir: Path | str) -> Manifest:
         """The manifest of an existing run directory (for reports); refuses a directory without one."""
         if not (Path(run_dir) / MANIFEST_FILE).is_file():
             raise WorldagentError(f"{run_dir} has no {MANIFEST_FILE}; run `worldagent reproduce --out {run_dir}` first.")

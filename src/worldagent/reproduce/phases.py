@@ -20,9 +20,10 @@ Layout of ``<run>/<env>/``::
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -144,8 +145,12 @@ def dataset_phase(ctx: EnvContext) -> dict:
 
     data = make_dataset(ctx.env, ctx.budgets.worlds, ctx.seed, progress=ctx.progress)
     data.save(ctx.dataset_path)
-    return {"dataset": ctx.rel(ctx.dataset_path), "worlds": len(data), "fingerprint": data.fingerprint,
-            "summary": f"{len(data):,} worlds (fingerprint {data.fingerprint})"}
+    return {
+        "dataset": ctx.rel(ctx.dataset_path),
+        "worlds": len(data),
+        "fingerprint": data.fingerprint,
+        "summary": f"{len(data):,} worlds (fingerprint {data.fingerprint})",
+    }
 
 
 def vae_config(preset: Preset, env: str):
@@ -173,15 +178,23 @@ def generator_phase(ctx: EnvContext) -> dict:
     save_generator(ctx.generator_dir, vae, ctx.dataset_path, generator)
     train, held = split_holdout(len(data), config.holdout, config.seed)
     key = jax.random.key(ctx.seed)
-    quality = {"env": ctx.env, "worlds": len(data), "reconstruction": reconstruction(generator, data, held, train),
-               ctx.env: (racing_figures(generator, data, QUALITY_SAMPLES, key) if ctx.env == "racing" else harvest_figures(generator, QUALITY_SAMPLES, key)),
-               "training": {"epochs": len(vae.history), "final": vae.history[-1], "history": vae.history}}
+    quality = {
+        "env": ctx.env,
+        "worlds": len(data),
+        "reconstruction": reconstruction(generator, data, held, train),
+        ctx.env: (racing_figures(generator, data, QUALITY_SAMPLES, key) if ctx.env == "racing" else harvest_figures(generator, QUALITY_SAMPLES, key)),
+        "training": {"epochs": len(vae.history), "final": vae.history[-1], "history": vae.history},
+    }
     quality_path = write_text(ctx.generator_dir / "quality.json", json.dumps(quality, indent=1))
     traversals = traversal_sheet(generator, ctx.figures / "generator_traversals.png")
     accuracy = quality["reconstruction"]["vae"]["accuracy"]
-    return {"generator": ctx.rel(ctx.generator_dir), "quality": ctx.rel(quality_path), "traversals": ctx.rel(traversals),
-            "final_loss": vae.history[-1]["holdout_loss"],
-            "summary": f"{len(vae.history)} epochs, held-out loss {vae.history[-1]['holdout_loss']:.1f}, cell accuracy {accuracy:.3f}"}
+    return {
+        "generator": ctx.rel(ctx.generator_dir),
+        "quality": ctx.rel(quality_path),
+        "traversals": ctx.rel(traversals),
+        "final_loss": vae.history[-1]["holdout_loss"],
+        "summary": f"{len(vae.history)} epochs, held-out loss {vae.history[-1]['holdout_loss']:.1f}, cell accuracy {accuracy:.3f}",
+    }
 
 
 # -- phase 2: agents (paper §4.3, §5.3) -----------------------------------------------------------
@@ -202,8 +215,10 @@ def harvest_train_config(preset: Preset):
     from worldagent.agents.dqn import DQNConfig
 
     budgets = preset.budgets("harvest")
-    overrides = {**({"num_envs": budgets.train_envs} if budgets.train_envs else {}),
-                 **({"learning_starts": budgets.learning_starts} if budgets.learning_starts is not None else {})}
+    overrides = {
+        **({"num_envs": budgets.train_envs} if budgets.train_envs else {}),
+        **({"learning_starts": budgets.learning_starts} if budgets.learning_starts is not None else {}),
+    }
     return DQNConfig(num_episodes=budgets.episodes, tagger=TAGGER, seed=preset.seed, **overrides)
 
 
@@ -216,24 +231,46 @@ def agent_phase(ctx: EnvContext) -> dict:
         import worldagent.agents.acktr  # noqa: F401  (registers ACKTR with the trainer)
         from worldagent.agents.training import train_racing
 
-        result = train_racing(racing_train_config(ctx.preset), distribution, ctx.agent_dir, ctx.preset.racing_algo, seed=ctx.seed,
-                              progress=ctx.progress, resume=True, distribution_spec=ctx.rel(ctx.dataset_path))
+        result = train_racing(
+            racing_train_config(ctx.preset),
+            distribution,
+            ctx.agent_dir,
+            ctx.preset.racing_algo,
+            seed=ctx.seed,
+            progress=ctx.progress,
+            resume=True,
+            distribution_spec=ctx.rel(ctx.dataset_path),
+        )
         last = {k: float(v[-1]) for k, v in result.curve.items() if len(v)}
-        return {"agent": ctx.rel(ctx.agent_dir / "policy"), "curve": ctx.rel(ctx.agent_dir / "curve.png"), "algo": ctx.preset.racing_algo,
-                "episodes": result.episodes, "env_steps": result.env_steps, "train_s": round(result.wall_seconds, 2), "final": last,
-                "summary": f"{ctx.preset.racing_algo} {result.episodes:,} episodes; last update: return {last.get('return', float('nan')):.1f}, "
-                           f"crash rate {last.get('crashed', float('nan')):.2f}"}
+        return {
+            "agent": ctx.rel(ctx.agent_dir / "policy"),
+            "curve": ctx.rel(ctx.agent_dir / "curve.png"),
+            "algo": ctx.preset.racing_algo,
+            "episodes": result.episodes,
+            "env_steps": result.env_steps,
+            "train_s": round(result.wall_seconds, 2),
+            "final": last,
+            "summary": f"{ctx.preset.racing_algo} {result.episodes:,} episodes; last update: return {last.get('return', float('nan')):.1f}, "
+            f"crash rate {last.get('crashed', float('nan')):.2f}",
+        }
     from worldagent.agents.dqn_run import train_harvest
 
     config = harvest_train_config(ctx.preset)
     result = train_harvest(config, distribution, ctx.agent_dir, progress=ctx.progress, resume=True)
     last = result.history[-1] if result.history else {}
     episodes = config.num_chunks * config.num_envs
-    return {"agent": ctx.rel(ctx.agent_dir / "agents"), "curve": ctx.rel(ctx.agent_dir / "curve.png"), "algo": "dqn", "tagger": TAGGER,
-            "episodes": episodes, "env_steps": result.env_steps, "train_s": round(result.wall_s, 2),
-            "final": {k: last[k] for k in ("group_reward", "equality", "conflict") if k in last},
-            "summary": f"4 DQNs, {episodes:,} episodes; last chunk: group reward {last.get('group_reward', float('nan')):.1f}, "
-                       f"conflict {last.get('conflict', float('nan')):.2f}"}
+    return {
+        "agent": ctx.rel(ctx.agent_dir / "agents"),
+        "curve": ctx.rel(ctx.agent_dir / "curve.png"),
+        "algo": "dqn",
+        "tagger": TAGGER,
+        "episodes": episodes,
+        "env_steps": result.env_steps,
+        "train_s": round(result.wall_s, 2),
+        "final": {k: last[k] for k in ("group_reward", "equality", "conflict") if k in last},
+        "summary": f"4 DQNs, {episodes:,} episodes; last chunk: group reward {last.get('group_reward', float('nan')):.1f}, "
+        f"conflict {last.get('conflict', float('nan')):.2f}",
+    }
 
 
 # -- phase 3: optimising worlds (paper §4.4, §6.1) ------------------------------------------------
@@ -246,12 +283,28 @@ def random_phase(ctx: EnvContext) -> dict:
     metric = reward_metric(ctx.env)
     env, params = ctx.env_and_params()
     with ctx.store() as store:
-        evaluations = random_evaluation(store, ctx.env, env, ctx.policy(), ctx.generator(), params, metric, worlds=ctx.budgets.random_worlds,
-                                        repeats=ctx.preset.repeats, seed=ctx.seed, progress=ctx.progress, resume=True)
+        evaluations = random_evaluation(
+            store,
+            ctx.env,
+            env,
+            ctx.policy(),
+            ctx.generator(),
+            params,
+            metric,
+            worlds=ctx.budgets.random_worlds,
+            repeats=ctx.preset.repeats,
+            seed=ctx.seed,
+            progress=ctx.progress,
+            resume=True,
+        )
     scores = np.array([e.score for e in evaluations])
-    return {"store": ctx.rel(ctx.store_path), "campaign": campaign_names(ctx.env, ctx.seed)["random"], "worlds": len(scores),
-            "mean": float(np.nanmean(scores)),
-            "summary": f"{len(scores):,} worlds x {ctx.preset.repeats} episodes; mean {metric} {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})"}
+    return {
+        "store": ctx.rel(ctx.store_path),
+        "campaign": campaign_names(ctx.env, ctx.seed)["random"],
+        "worlds": len(scores),
+        "mean": float(np.nanmean(scores)),
+        "summary": f"{len(scores):,} worlds x {ctx.preset.repeats} episodes; mean {metric} {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})",
+    }
 
 
 def random_scores(ctx: EnvContext) -> np.ndarray:
@@ -269,13 +322,33 @@ def strategic_phase(ctx: EnvContext) -> dict:
     env, params = ctx.env_and_params()
     policy = ctx.policy()
     with ctx.store() as store:
-        result = strategic_evaluation(store, ctx.env, env, policy, ctx.generator(), params, metric, budget=ctx.budgets.strategic_budget,
-                                      repeats=ctx.preset.repeats, seed=ctx.seed, optimiser="cmaes", progress=ctx.progress, resume=True)
+        result = strategic_evaluation(
+            store,
+            ctx.env,
+            env,
+            policy,
+            ctx.generator(),
+            params,
+            metric,
+            budget=ctx.budgets.strategic_budget,
+            repeats=ctx.preset.repeats,
+            seed=ctx.seed,
+            optimiser="cmaes",
+            progress=ctx.progress,
+            resume=True,
+        )
     low, high = result["min"], result["max"]
-    figure = strategic_figure(ctx.env, env, policy, params, low, high, random_scores(ctx), metric, ctx.figures / "strategic.png",
-                              key=result.get("keys"))
-    return {"store": ctx.rel(ctx.store_path), "campaigns": list(result["campaigns"]), "min": float(low.score), "max": float(high.score),
-            "figure": ctx.rel(figure), "summary": f"{metric}: min {low.score:.4g}, max {high.score:.4g} ({ctx.budgets.strategic_budget} worlds each)"}
+    figure = strategic_figure(
+        ctx.env, env, policy, params, low, high, random_scores(ctx), metric, ctx.figures / "strategic.png", key=result.get("keys")
+    )
+    return {
+        "store": ctx.rel(ctx.store_path),
+        "campaigns": list(result["campaigns"]),
+        "min": float(low.score),
+        "max": float(high.score),
+        "figure": ctx.rel(figure),
+        "summary": f"{metric}: min {low.score:.4g}, max {high.score:.4g} ({ctx.budgets.strategic_budget} worlds each)",
+    }
 
 
 def compare_phase(ctx: EnvContext) -> dict:
@@ -290,15 +363,38 @@ def compare_phase(ctx: EnvContext) -> dict:
     env, params = ctx.env_and_params()
     runs = {}
     with ctx.store() as store:
-        for optimisers, budget in ((("cmaes",), budgets.compare_budget), (("bo",), budgets.bo_budget or budgets.compare_budget),
-                                   (("random",), budgets.compare_budget)):
-            runs.update(compare_optimisers(store, ctx.env, env, ctx.policy(), ctx.generator(), params, metric, maximize=False,
-                                           optimisers=optimisers, budget=budget, seeds=tuple(budgets.compare_seeds),
-                                           repeats=ctx.preset.repeats, progress=ctx.progress, resume=True))
+        for optimisers, budget in (
+            (("cmaes",), budgets.compare_budget),
+            (("bo",), budgets.bo_budget or budgets.compare_budget),
+            (("random",), budgets.compare_budget),
+        ):
+            runs.update(
+                compare_optimisers(
+                    store,
+                    ctx.env,
+                    env,
+                    ctx.policy(),
+                    ctx.generator(),
+                    params,
+                    metric,
+                    maximize=False,
+                    optimisers=optimisers,
+                    budget=budget,
+                    seeds=tuple(budgets.compare_seeds),
+                    repeats=ctx.preset.repeats,
+                    progress=ctx.progress,
+                    resume=True,
+                )
+            )
     figure = comparison_figure(runs, random_scores(ctx), metric, ctx.figures / "comparison.png", maximize=False)
     best = {opt: float(np.nanmin(np.concatenate([np.ravel(r) for r in scores]))) for opt, scores in runs.items()}
-    return {"store": ctx.rel(ctx.store_path), "campaigns": compare_names(ctx.env, budgets.compare_seeds, tuple(runs)), "best": best,
-            "figure": ctx.rel(figure), "summary": "lowest " + ", ".join(f"{opt} {value:.4g}" for opt, value in best.items())}
+    return {
+        "store": ctx.rel(ctx.store_path),
+        "campaigns": compare_names(ctx.env, budgets.compare_seeds, tuple(runs)),
+        "best": best,
+        "figure": ctx.rel(figure),
+        "summary": "lowest " + ", ".join(f"{opt} {value:.4g}" for opt, value in best.items()),
+    }
 
 
 # -- influencing (paper §6.2) --------------------------------------------------------------------
@@ -314,17 +410,36 @@ def influence_phase(ctx: EnvContext) -> dict:
     env, params = ctx.env_and_params()
     racing = ctx.env == "racing"
     out = ctx.dir / "influence"
-    result = influence(out, ctx.env, ctx.policy(), ctx.generator(), params, parse_selection(ctx.preset.selection(ctx.env), ctx.env),
-                       algo=ctx.preset.algo(ctx.env), episodes=budgets.influence_episodes, seeds=tuple(budgets.influence_seeds),
-                       candidates=budgets.influence_candidates, search_budget=budgets.influence_search_budget,
-                       eval_worlds=budgets.influence_eval_worlds, repeats=ctx.preset.repeats, tagger=None if racing else TAGGER,
-                       progress=ctx.progress, config=racing_train_config(ctx.preset) if racing else harvest_train_config(ctx.preset),
-                       env=env, seed=ctx.seed)
+    result = influence(
+        out,
+        ctx.env,
+        ctx.policy(),
+        ctx.generator(),
+        params,
+        parse_selection(ctx.preset.selection(ctx.env), ctx.env),
+        algo=ctx.preset.algo(ctx.env),
+        episodes=budgets.influence_episodes,
+        seeds=tuple(budgets.influence_seeds),
+        candidates=budgets.influence_candidates,
+        search_budget=budgets.influence_search_budget,
+        eval_worlds=budgets.influence_eval_worlds,
+        repeats=ctx.preset.repeats,
+        tagger=None if racing else TAGGER,
+        progress=ctx.progress,
+        config=racing_train_config(ctx.preset) if racing else harvest_train_config(ctx.preset),
+        env=env,
+        seed=ctx.seed,
+    )
     worlds, _, values = load_influenced_worlds(out, ctx.env)
     examples = take_worlds(worlds, example_indices(values, 4))
     figure = influence_figure(result, examples, ctx.env, ctx.figures / "influence.png")
-    return {"influence": ctx.rel(out / "influence.json"), "figure": ctx.rel(figure), "selection": ctx.preset.selection(ctx.env),
-            "selected": result["worlds"]["selected"], "summary": influence_summary(result)}
+    return {
+        "influence": ctx.rel(out / "influence.json"),
+        "figure": ctx.rel(figure),
+        "selection": ctx.preset.selection(ctx.env),
+        "selected": result["worlds"]["selected"],
+        "summary": influence_summary(result),
+    }
 
 
 def take_worlds(worlds, indices):

@@ -17,8 +17,8 @@ from __future__ import annotations
 import shutil
 import sqlite3
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Callable, Iterable
 
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.manifest import Manifest, phase_key
@@ -43,8 +43,9 @@ def restart_closure(phases: Iterable[str]) -> list[str]:
     return [name for name in PHASES if name in found]
 
 
-def reproduce(preset: Preset, out: Path | str, envs: list[str], restart: Iterable[str] = (), progress: bool = True,
-              echo: Callable[[str], None] = print) -> Manifest:
+def reproduce(
+    preset: Preset, out: Path | str, envs: list[str], restart: Iterable[str] = (), progress: bool = True, echo: Callable[[str], None] = print
+) -> Manifest:
     """Run (or resume) the pipeline for ``envs`` in run directory ``out`` and build its report.
 
     Args:
@@ -69,8 +70,14 @@ def reproduce(preset: Preset, out: Path | str, envs: list[str], restart: Iterabl
     for env in envs:
         ctx = EnvContext(out, env, preset, progress)
         for phase in PHASES:
-            run_phase(manifest, phase_key(env, phase), preset.phase_config(env, phase), lambda p=phase: PHASE_FUNCTIONS[p](ctx), echo,
-                      tolerate=phase in TOLERATED)
+            run_phase(
+                manifest,
+                phase_key(env, phase),
+                preset.phase_config(env, phase),
+                lambda p=phase: PHASE_FUNCTIONS[p](ctx),
+                echo,
+                tolerate=phase in TOLERATED,
+            )
     from worldagent.reports.html import build_report
 
     run_phase(manifest, "report", {"preset": preset.name}, lambda: report_outputs(build_report(out), out), echo, skip=False)
@@ -89,8 +96,9 @@ def check_configs(manifest: Manifest, preset: Preset, envs: list[str]) -> None:
             manifest.check_config(phase_key(env, phase), preset.phase_config(env, phase))
 
 
-def run_phase(manifest: Manifest, key: str, config: dict, work: Callable[[], dict], echo: Callable[[str], None],
-              tolerate: bool = False, skip: bool = True) -> dict:
+def run_phase(
+    manifest: Manifest, key: str, config: dict, work: Callable[[], dict], echo: Callable[[str], None], tolerate: bool = False, skip: bool = True
+) -> dict:
     """Run one phase unless it is done with ``config``; record it; print one status line."""
     if skip and manifest.is_done(key, config):
         echo(f"{key}: done already, skipped ({manifest.phase(key).get('wall_s', 0):.1f} s when it ran)")

@@ -116,9 +116,13 @@ class Preset:
             raise WorldagentError(f"repeats={self.repeats}, seed={self.seed}; repeats must be >= 1 and the seed >= 0.")
         for env in ENVS:
             budgets = self.budgets(env)
-            small = [f.name for f in dataclasses.fields(budgets) if isinstance(getattr(budgets, f.name), int)
-                     and f.name not in ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts")
-                     and getattr(budgets, f.name) < 1]
+            small = [
+                f.name
+                for f in dataclasses.fields(budgets)
+                if isinstance(getattr(budgets, f.name), int)
+                and f.name not in ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts")
+                and getattr(budgets, f.name) < 1
+            ]
             if small:
                 raise WorldagentError(f"preset {self.name!r}: {env} budgets {', '.join(small)} must be at least 1.")
 
@@ -136,7 +140,7 @@ class Preset:
         """The preset as indented JSON (``worldagent reproduce --show``)."""
         return json.dumps(self.to_dict(), indent=2)
 
-    def with_algo(self, algo: str | None) -> "Preset":
+    def with_algo(self, algo: str | None) -> Preset:
         """This preset with another racing algorithm (``--algo``)."""
         return self if algo is None else replace(self, racing_algo=algo)
 
@@ -147,15 +151,32 @@ class Preset:
         table = {
             "dataset": {"worlds": b.worlds},
             "generator": {"epochs": b.vae_epochs, "hidden": list(self.vae_hidden), "batch_size": self.vae_batch_size},
-            "agent": {"algo": self.algo(env), "episodes": b.episodes, "train_envs": b.train_envs, "learning_starts": b.learning_starts,
-                      **({"tagger": TAGGER} if env == "harvest" else {})},
+            "agent": {
+                "algo": self.algo(env),
+                "episodes": b.episodes,
+                "train_envs": b.train_envs,
+                "learning_starts": b.learning_starts,
+                **({"tagger": TAGGER} if env == "harvest" else {}),
+            },
             "random": {"worlds": b.random_worlds, "repeats": self.repeats},
             "strategic": {"budget": b.strategic_budget, "repeats": self.repeats, "optimiser": "cmaes"},
-            "compare": {"budget": b.compare_budget, "bo_budget": b.bo_budget or b.compare_budget, "seeds": list(b.compare_seeds),
-                        "repeats": self.repeats, "optimisers": ["cmaes", "bo", "random"]},
-            "influence": {"selection": self.selection(env), "candidates": b.influence_candidates, "episodes": b.influence_episodes,
-                          "eval_worlds": b.influence_eval_worlds, "seeds": list(b.influence_seeds),
-                          "search_budget": b.influence_search_budget, "repeats": self.repeats, "algo": self.algo(env)},
+            "compare": {
+                "budget": b.compare_budget,
+                "bo_budget": b.bo_budget or b.compare_budget,
+                "seeds": list(b.compare_seeds),
+                "repeats": self.repeats,
+                "optimisers": ["cmaes", "bo", "random"],
+            },
+            "influence": {
+                "selection": self.selection(env),
+                "candidates": b.influence_candidates,
+                "episodes": b.influence_episodes,
+                "eval_worlds": b.influence_eval_worlds,
+                "seeds": list(b.influence_seeds),
+                "search_budget": b.influence_search_budget,
+                "repeats": self.repeats,
+                "algo": self.algo(env),
+            },
         }
         if phase not in table:
             raise WorldagentError(f"unknown phase {phase!r}; use one of: {', '.join(PHASES)}.")
@@ -173,23 +194,72 @@ class Preset:
 PAPER = Preset(
     name="paper",
     description="The paper's budgets (10,000 worlds, 10,000 / 5,000 training episodes, population 21, 8 repeats, 1,000 random worlds); for a GPU.",
-    racing=EnvBudgets(worlds=10_000, vae_epochs=25, episodes=10_000, random_worlds=1_000, strategic_budget=2_100,
-                      compare_budget=1_050, bo_budget=210, compare_seeds=(0, 1, 2), influence_candidates=1_000, influence_episodes=10_000,
-                      influence_eval_worlds=1_000, influence_seeds=(0, 1, 2), influence_selection="crash_rate > 0"),
-    harvest=EnvBudgets(worlds=10_000, vae_epochs=25, episodes=5_000, random_worlds=1_000, strategic_budget=1_050,
-                       compare_budget=525, bo_budget=105, compare_seeds=(0, 1, 2), influence_candidates=1_000, influence_episodes=5_000,
-                       influence_eval_worlds=1_000, influence_seeds=(0, 1, 2), influence_search_budget=525),
+    racing=EnvBudgets(
+        worlds=10_000,
+        vae_epochs=25,
+        episodes=10_000,
+        random_worlds=1_000,
+        strategic_budget=2_100,
+        compare_budget=1_050,
+        bo_budget=210,
+        compare_seeds=(0, 1, 2),
+        influence_candidates=1_000,
+        influence_episodes=10_000,
+        influence_eval_worlds=1_000,
+        influence_seeds=(0, 1, 2),
+        influence_selection="crash_rate > 0",
+    ),
+    harvest=EnvBudgets(
+        worlds=10_000,
+        vae_epochs=25,
+        episodes=5_000,
+        random_worlds=1_000,
+        strategic_budget=1_050,
+        compare_budget=525,
+        bo_budget=105,
+        compare_seeds=(0, 1, 2),
+        influence_candidates=1_000,
+        influence_episodes=5_000,
+        influence_eval_worlds=1_000,
+        influence_seeds=(0, 1, 2),
+        influence_search_budget=525,
+    ),
 )
 
 QUICK = Preset(
     name="quick",
     description="Small budgets that finish both environments in about 15 minutes on 2 CPU cores and still show every phenomenon.",
-    racing=EnvBudgets(worlds=10_000, vae_epochs=10, episodes=10_000, random_worlds=1_000, strategic_budget=420,
-                      compare_budget=210, bo_budget=42, compare_seeds=(0, 1), influence_candidates=500, influence_episodes=10_000,
-                      influence_eval_worlds=200, influence_seeds=(0,), influence_selection="crash_rate > 0"),
-    harvest=EnvBudgets(worlds=5_000, vae_epochs=10, episodes=1_000, random_worlds=200, strategic_budget=105,
-                       compare_budget=42, bo_budget=21, compare_seeds=(0,), influence_candidates=200, influence_episodes=400,
-                       influence_eval_worlds=50, influence_seeds=(0,), influence_search_budget=210, learning_starts=4_000),
+    racing=EnvBudgets(
+        worlds=10_000,
+        vae_epochs=10,
+        episodes=10_000,
+        random_worlds=1_000,
+        strategic_budget=420,
+        compare_budget=210,
+        bo_budget=42,
+        compare_seeds=(0, 1),
+        influence_candidates=500,
+        influence_episodes=10_000,
+        influence_eval_worlds=200,
+        influence_seeds=(0,),
+        influence_selection="crash_rate > 0",
+    ),
+    harvest=EnvBudgets(
+        worlds=5_000,
+        vae_epochs=10,
+        episodes=1_000,
+        random_worlds=200,
+        strategic_budget=105,
+        compare_budget=42,
+        bo_budget=21,
+        compare_seeds=(0,),
+        influence_candidates=200,
+        influence_episodes=400,
+        influence_eval_worlds=50,
+        influence_seeds=(0,),
+        influence_search_budget=210,
+        learning_starts=4_000,
+    ),
 )
 
 TINY = Preset(
@@ -198,12 +268,35 @@ TINY = Preset(
     repeats=2,
     vae_hidden=(64, 32),
     vae_batch_size=32,
-    racing=EnvBudgets(worlds=256, vae_epochs=3, episodes=64, random_worlds=42, strategic_budget=21, compare_budget=21,
-                      compare_seeds=(0,), influence_candidates=42, influence_episodes=64, influence_eval_worlds=21,
-                      influence_seeds=(0,), train_envs=8),
-    harvest=EnvBudgets(worlds=256, vae_epochs=3, episodes=4, random_worlds=8, strategic_budget=21, compare_budget=0,
-                       compare_seeds=(0,), influence_candidates=8, influence_episodes=4, influence_eval_worlds=4,
-                       influence_seeds=(0,), train_envs=4, learning_starts=1_000),
+    racing=EnvBudgets(
+        worlds=256,
+        vae_epochs=3,
+        episodes=64,
+        random_worlds=42,
+        strategic_budget=21,
+        compare_budget=21,
+        compare_seeds=(0,),
+        influence_candidates=42,
+        influence_episodes=64,
+        influence_eval_worlds=21,
+        influence_seeds=(0,),
+        train_envs=8,
+    ),
+    harvest=EnvBudgets(
+        worlds=256,
+        vae_epochs=3,
+        episodes=4,
+        random_worlds=8,
+        strategic_budget=21,
+        compare_budget=0,
+        compare_seeds=(0,),
+        influence_candidates=8,
+        influence_episodes=4,
+        influence_eval_worlds=4,
+        influence_seeds=(0,),
+        train_envs=4,
+        learning_starts=1_000,
+    ),
 )
 
 PRESETS = {preset.name: preset for preset in (TINY, QUICK, PAPER)}

@@ -17,8 +17,9 @@ with an error instead of optimising on it.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -95,15 +96,24 @@ def run_campaign(
     """Run (or resume) a campaign to its budget; returns all its evaluations in order."""
     spec.validate()
     campaign = store.open_campaign(
-        spec.name, spec.env, spec.objective, spec.maximize, spec.optimiser, spec.budget, spec.seed,
-        {"dim": spec.dim, **asdict(spec.config)}, resume,
+        spec.name,
+        spec.env,
+        spec.objective,
+        spec.maximize,
+        spec.optimiser,
+        spec.budget,
+        spec.seed,
+        {"dim": spec.dim, **asdict(spec.config)},
+        resume,
     )
     stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
     optimiser = make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, spec.config)
     done, generation = 0, 0
     pick = max if spec.maximize else min
     best = pick([e.score for e in stored.values() if np.isfinite(e.score)], default=float("nan"))
-    with progress_bar(f"{spec.optimiser} {'max' if spec.maximize else 'min'}imising {spec.objective}", total=spec.budget, enabled=progress) as advance:
+    with progress_bar(
+        f"{spec.optimiser} {'max' if spec.maximize else 'min'}imising {spec.objective}", total=spec.budget, enabled=progress
+    ) as advance:
         while done < spec.budget:
             z = optimiser.ask(optimiser.batch_size if spec.optimiser == "cmaes" else min(optimiser.batch_size, spec.budget - done))
             scores = np.full(len(z), np.nan)

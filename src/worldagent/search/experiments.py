@@ -13,7 +13,8 @@ experiment evaluates nothing new and a killed one loses nothing it finished.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,9 @@ def _stored_config(store: RunStore, name: str) -> OptimiserConfig | None:
     return OptimiserConfig(**{key: value for key, value in existing.config.items() if key in fields})
 
 
-def _campaign(store, name, env_name, env, policy, G, params, metric, maximize, optimiser, budget, seed, repeats, config, progress, resume) -> list[Evaluation]:
+def _campaign(
+    store, name, env_name, env, policy, G, params, metric, maximize, optimiser, budget, seed, repeats, config, progress, resume
+) -> list[Evaluation]:
     """Run (or resume) campaign ``name`` of ``metric`` over G's latent space; its evaluations in order.
 
     ``config`` None: the settings the campaign was started with, else the defaults, so a rerun
@@ -66,8 +69,19 @@ def _campaign(store, name, env_name, env, policy, G, params, metric, maximize, o
 
 
 def random_evaluation(
-    store: RunStore, env_name: str, env, policy, G, params, metric: str, *, worlds: int = 1000, repeats: int = 8, seed: int = 0,
-    progress: bool = True, resume: bool = True,
+    store: RunStore,
+    env_name: str,
+    env,
+    policy,
+    G,
+    params,
+    metric: str,
+    *,
+    worlds: int = 1000,
+    repeats: int = 8,
+    seed: int = 0,
+    progress: bool = True,
+    resume: bool = True,
 ) -> list[Evaluation]:
     """The metric on ``worlds`` random worlds G(z), z ~ N(0, I) (paper §6.1.1, Figure 6a).
 
@@ -99,8 +113,21 @@ def best(evaluations: Sequence[Evaluation], maximize: bool) -> Evaluation:
 
 
 def strategic_evaluation(
-    store: RunStore, env_name: str, env, policy, G, params, metric: str, *, budget: int, repeats: int = 8, seed: int = 0,
-    optimiser: str = "cmaes", progress: bool = True, resume: bool = True, config: OptimiserConfig | None = None,
+    store: RunStore,
+    env_name: str,
+    env,
+    policy,
+    G,
+    params,
+    metric: str,
+    *,
+    budget: int,
+    repeats: int = 8,
+    seed: int = 0,
+    optimiser: str = "cmaes",
+    progress: bool = True,
+    resume: bool = True,
+    config: OptimiserConfig | None = None,
 ) -> dict:
     """Find the worlds that minimise and maximise ``metric`` (paper §6.1.2, Figure 6b).
 
@@ -123,7 +150,9 @@ def strategic_evaluation(
     names = strategic_campaign_names(optimiser, metric, seed)
     found = {}
     for direction, name, maximize in (("min", names[0], False), ("max", names[1], True)):
-        evaluations = _campaign(store, name, env_name, env, policy, G, params, metric, maximize, optimiser, budget, seed, repeats, config, progress, resume)
+        evaluations = _campaign(
+            store, name, env_name, env, policy, G, params, metric, maximize, optimiser, budget, seed, repeats, config, progress, resume
+        )
         found[direction] = best(evaluations, maximize)
     with_worlds = {d: _with_world(store, found[d]) for d in found}
     keys = tuple(scored_keys_of(store, with_worlds[d]) for d in ("min", "max"))
@@ -131,9 +160,22 @@ def strategic_evaluation(
 
 
 def compare_optimisers(
-    store: RunStore, env_name: str, env, policy, G, params, metric: str, *, maximize: bool = False,
-    optimisers: Sequence[str] = ("cmaes", "bo", "random"), budget: int, seeds: Sequence[int] = (0, 1, 2), repeats: int = 8,
-    progress: bool = True, resume: bool = True, config: OptimiserConfig | None = None,
+    store: RunStore,
+    env_name: str,
+    env,
+    policy,
+    G,
+    params,
+    metric: str,
+    *,
+    maximize: bool = False,
+    optimisers: Sequence[str] = ("cmaes", "bo", "random"),
+    budget: int,
+    seeds: Sequence[int] = (0, 1, 2),
+    repeats: int = 8,
+    progress: bool = True,
+    resume: bool = True,
+    config: OptimiserConfig | None = None,
 ) -> dict[str, list[np.ndarray]]:
     """Run each optimiser for each seed on the same objective (paper §6.1.3, Figure 7).
 
@@ -159,7 +201,9 @@ def compare_optimisers(
         runs[optimiser] = []
         for seed in seeds:
             name = comparison_campaign_name(optimiser, maximize, metric, seed)
-            evaluations = _campaign(store, name, env_name, env, policy, G, params, metric, maximize, optimiser, budget, seed, repeats, config, progress, resume)
+            evaluations = _campaign(
+                store, name, env_name, env, policy, G, params, metric, maximize, optimiser, budget, seed, repeats, config, progress, resume
+            )
             runs[optimiser].append(np.array([e.score for e in evaluations[:budget]], np.float64))
     return runs
 

@@ -63,7 +63,7 @@ class WorldDataset:
         """World ``index`` (no batch axis)."""
         return _map_fields(self.worlds, lambda leaf: leaf[index])
 
-    def subset(self, indices) -> "WorldDataset":
+    def subset(self, indices) -> WorldDataset:
         """The worlds at ``indices`` as a dataset of their own."""
         indices = np.asarray(indices)
         return WorldDataset(self.env, self.seeds[indices], _map_fields(self.worlds, lambda x: x[indices]), self.cells[indices], self.cell_shape)
@@ -78,6 +78,7 @@ class WorldDataset:
             "cell_shape": np.asarray(self.cell_shape, np.int64),
         }
         arrays.update({f"world/{name}": np.asarray(value) for name, value in _fields(self.worlds).items()})
+
         def save(tmp: Path) -> None:
             with open(tmp, "wb") as handle:  # a handle: np.savez would append ".npz" to a path
                 np.savez_compressed(handle, **arrays)
@@ -85,7 +86,7 @@ class WorldDataset:
         return write_atomically(path, save)
 
     @classmethod
-    def load(cls, path: Path | str, env: str | None = None) -> "WorldDataset":
+    def load(cls, path: Path | str, env: str | None = None) -> WorldDataset:
         """Read and check a dataset file; ``env``, if given, must match the file's."""
         path = Path(path)
         remedy = f"make it again with `worldagent dataset {env or 'racing|harvest'} --out {path}`"
@@ -99,7 +100,7 @@ class WorldDataset:
         return cls._from_arrays(arrays, path, env, remedy)
 
     @classmethod
-    def _from_arrays(cls, arrays: dict, path: Path, env: str | None, remedy: str) -> "WorldDataset":
+    def _from_arrays(cls, arrays: dict, path: Path, env: str | None, remedy: str) -> WorldDataset:
         missing = {"format_version", "env", "seeds", "cells", "cell_shape"} - set(arrays)
         if missing:
             raise WorldagentError(f"dataset file {path} lacks {', '.join(sorted(missing))}; {remedy}.")
@@ -114,7 +115,7 @@ class WorldDataset:
         kind = world_kind(file_env)
         seeds, cells = arrays["seeds"], arrays["cells"]
         cell_shape = tuple(int(s) for s in arrays["cell_shape"])
-        fields = {name[len("world/"):]: value for name, value in arrays.items() if name.startswith("world/")}
+        fields = {name[len("world/") :]: value for name, value in arrays.items() if name.startswith("world/")}
         world_type = type(kind.generate(np.zeros(1, np.int64)))
         expected = {f.name for f in dataclasses.fields(world_type)}
         if set(fields) != expected:

@@ -131,7 +131,9 @@ def load_generator(directory: Path | str, dataset_path: Path | str | None = None
     try:
         meta = json.loads((directory / GENERATOR_FILE).read_text())
     except (OSError, ValueError):
-        raise WorldagentError(f"{directory} holds no generator; train one with `worldagent generator train racing|harvest --out {directory}`.") from None
+        raise WorldagentError(
+            f"{directory} holds no generator; train one with `worldagent generator train racing|harvest --out {directory}`."
+        ) from None
     vae = TrainedVAE.load(directory)
     dataset = WorldDataset.load(dataset_path or meta["dataset"], env=meta["env"])
     return build_generator(vae, dataset, meta["apples"] or None), vae, dataset

@@ -7,8 +7,9 @@ wall and apple grids), and the shape of those cells for pictures.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

@@ -165,7 +165,7 @@ class TrainedVAE:
         return directory
 
     @classmethod
-    def load(cls, directory: Path | str) -> "TrainedVAE":
+    def load(cls, directory: Path | str) -> TrainedVAE:
         """Read a checkpoint written by ``save``; refuses other versions and architectures."""
         directory = Path(directory)
         remedy = f"train one with `worldagent generator train racing|harvest --out {directory}`"
@@ -175,7 +175,9 @@ class TrainedVAE:
         except (OSError, ValueError) as error:
             raise WorldagentError(f"no readable VAE checkpoint in {directory} ({type(error).__name__}); {remedy}.") from None
         if meta.get("checkpoint_version") != CHECKPOINT_VERSION:
-            raise WorldagentError(f"VAE checkpoint in {directory} has version {meta.get('checkpoint_version')}, expected {CHECKPOINT_VERSION}; {remedy}.")
+            raise WorldagentError(
+                f"VAE checkpoint in {directory} has version {meta.get('checkpoint_version')}, expected {CHECKPOINT_VERSION}; {remedy}."
+            )
         config = VAEConfig(**{**meta["config"], "encoder": tuple(meta["config"]["encoder"]), "decoder": tuple(meta["config"]["decoder"])})
         cell_shape = tuple(meta["cell_shape"])
         model = make_vae(int(np.prod(cell_shape)), config)
@@ -187,7 +189,9 @@ class TrainedVAE:
             raise WorldagentError(f"VAE weights in {directory} do not fit the architecture in vae.json ({type(error).__name__}); {remedy}.") from None
         if not shapes_match:
             raise WorldagentError(f"VAE weights in {directory} do not fit the architecture in vae.json; {remedy}.")
-        return cls(model, params, config, meta["env"], cell_shape, meta["fingerprint"], meta["history"], np.asarray(meta["holdout_indices"], np.int64))
+        return cls(
+            model, params, config, meta["env"], cell_shape, meta["fingerprint"], meta["history"], np.asarray(meta["holdout_indices"], np.int64)
+        )
 
 
 def split_holdout(count: int, holdout: float, seed: int) -> tuple[np.ndarray, np.ndarray]:

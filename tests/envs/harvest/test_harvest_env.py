@@ -160,8 +160,9 @@ def test_regrowth_frequency_matches_the_table(env, place, quiet_params):
     starts = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *[start(count) for count in range(13)])
     draws = 20000
     regrew = jax.jit(
-        jax.vmap(lambda s: jax.vmap(lambda k: env.step(k, s, jnp.zeros(4, jnp.int32), params)[1].apples[4, 4])(
-            jax.random.split(jax.random.key(7), draws)))
+        jax.vmap(
+            lambda s: jax.vmap(lambda k: env.step(k, s, jnp.zeros(4, jnp.int32), params)[1].apples[4, 4])(jax.random.split(jax.random.key(7), draws))
+        )
     )(starts)
     frequency = np.asarray(regrew).mean(axis=1)
     sd = np.sqrt(table * (1 - table) / draws)
@@ -198,7 +199,17 @@ def tag_scene(place, world, params, target):
 
 @pytest.mark.parametrize(
     "target, hit",
-    [((2, 4), True), ((6, 4), True), ((7, 4), False), ((4, 3), True), ((4, 5), True), ((4, 2), False), ((4, 6), False), ((1, 5), False), ((0, 4), False)],
+    [
+        ((2, 4), True),
+        ((6, 4), True),
+        ((7, 4), False),
+        ((4, 3), True),
+        ((4, 5), True),
+        ((4, 2), False),
+        ((4, 6), False),
+        ((1, 5), False),
+        ((0, 4), False),
+    ],
 )
 def test_tag_beam_is_three_wide_and_five_long(place, step_fn, open_map, tag_params, target, hit):
     state = tag_scene(place, open_map, tag_params, target)
@@ -209,7 +220,7 @@ def test_tag_beam_is_three_wide_and_five_long(place, step_fn, open_map, tag_para
 
 def test_tag_is_refused_where_the_mask_disables_it(place, step_fn, open_map, quiet_params, tag_params):
     state = tag_scene(place, open_map, quiet_params, (3, 4))
-    _, after, *_ , info = step_fn(jax.random.key(12), state, actions(a0=TAG), quiet_params)
+    _, after, *_, info = step_fn(jax.random.key(12), state, actions(a0=TAG), quiet_params)
     assert not info["hit"].any() and after.position.tolist() == state.position.tolist()
     # agent 1 may not tag even where agent 0 may
     state = place(open_map, tag_params, position=[[4, 4], [2, 4], [8, 0], [8, 8]], heading=[N, S, N, N])

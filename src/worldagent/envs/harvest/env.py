@@ -395,11 +395,7 @@ class Harvest(Environment):
         ahead, half = size - 1 - behind, size // 2
         on_map = state.tagged_timer == 0
         agents = occupancy(state.position, on_map, state.apples.shape)
-        codes = (
-            state.world.walls.astype(jnp.uint8) * WALL_BIT
-            | state.apples.astype(jnp.uint8) * APPLE_BIT
-            | agents.astype(jnp.uint8) * AGENT_BIT
-        )
+        codes = state.world.walls.astype(jnp.uint8) * WALL_BIT | state.apples.astype(jnp.uint8) * APPLE_BIT | agents.astype(jnp.uint8) * AGENT_BIT
         pad = max(ahead, behind, half)  # beyond the edge is wall
         height, width = codes.shape
         side = max(height, width)  # square, so that the board and its transpose stack
@@ -426,6 +422,4 @@ class Harvest(Environment):
 
     def metrics(self, state: HarvestState) -> dict[str, jax.Array]:
         """Per-episode metrics of the episode so far (see ``metrics.episode_metrics``)."""
-        return episode_metrics(
-            state.returns, state.reward_time, state.conflict_steps, state.untagged_agent_steps, state.time
-        )
+        return episode_metrics(state.returns, state.reward_time, state.conflict_steps, state.untagged_agent_steps, state.time)

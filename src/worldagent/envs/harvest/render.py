@@ -15,8 +15,8 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from worldagent.envs.harvest.env import HEADING_STEP, Harvest, HarvestState
-from worldagent.files import save_png, write_atomically
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
+from worldagent.files import save_png, write_atomically
 
 BACKGROUND = (0, 0, 0)
 WALL = (128, 128, 128)

@@ -49,9 +49,7 @@ class HarvestMap:
         """Host-side check of shapes, dtypes and spawn corners; raises ``WorldagentError``."""
         walls, apples = np.asarray(self.walls), np.asarray(self.apples)
         if walls.ndim < 2 or walls.shape != apples.shape:
-            raise WorldagentError(
-                f"harvest map has walls {walls.shape} and apples {apples.shape}; expected two (H, W) grids of the same shape."
-            )
+            raise WorldagentError(f"harvest map has walls {walls.shape} and apples {apples.shape}; expected two (H, W) grids of the same shape.")
         height, width = walls.shape[-2:]
         if height < 3 or width < 3:
             raise WorldagentError(f"harvest map is {height}x{width}; make it at least 3x3.")
@@ -63,12 +61,10 @@ class HarvestMap:
             raise WorldagentError("harvest map has apples inside walls; clear apples from wall cells (repair the map).")
         rows, cols = spawn_corners(height, width).T
         if np.any(walls[..., rows, cols] | apples[..., rows, cols]):
-            raise WorldagentError(
-                "harvest map blocks a spawn corner; the four corner cells must hold neither walls nor apples."
-            )
+            raise WorldagentError("harvest map blocks a spawn corner; the four corner cells must hold neither walls nor apples.")
 
     @classmethod
-    def from_str(cls, text: str) -> "HarvestMap":
+    def from_str(cls, text: str) -> HarvestMap:
         """Parse the text form (``#`` wall, ``A`` apple, ``.`` empty); rows must be equally long."""
         rows = [line.strip() for line in text.strip().splitlines() if line.strip()]
         if not rows or len({len(row) for row in rows}) != 1:

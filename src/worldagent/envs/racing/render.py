@@ -107,8 +107,6 @@ def save_episode_gif(
     frames_at = list(range(0, len(positions), stride))
     if frames_at[-1] != len(positions) - 1:
         frames_at.append(len(positions) - 1)
-    frames = [
-        track_image(track, size, positions[: t + 1], positions[t], crashed and t == len(positions) - 1) for t in frames_at
-    ]
+    frames = [track_image(track, size, positions[: t + 1], positions[t], crashed and t == len(positions) - 1) for t in frames_at]
     save = lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)  # noqa: E731
     return write_atomically(out, save)

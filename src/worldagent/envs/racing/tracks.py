@@ -198,10 +198,7 @@ def _cut(history: np.ndarray, length: np.ndarray) -> list[np.ndarray | None]:
         i1, i2 = found[-2], found[-1]
         loop = np.ascontiguousarray(history[i1 : i2 - 1, :, b])
         first_beta = loop[0, 1]
-        glue = np.sqrt(
-            np.square(math.cos(first_beta) * (loop[0, 2] - loop[-1, 2]))
-            + np.square(math.sin(first_beta) * (loop[0, 3] - loop[-1, 3]))
-        )
+        glue = np.sqrt(np.square(math.cos(first_beta) * (loop[0, 2] - loop[-1, 2])) + np.square(math.sin(first_beta) * (loop[0, 3] - loop[-1, 3])))
         if glue > TRACK_DETAIL_STEP:
             loops.append(None)
             continue
@@ -430,8 +427,7 @@ def track_statistics(seeds_or_loops) -> dict:
         stats["max_coord"].append(np.abs(xy).max() / PLAYFIELD)
     stats = {name: np.asarray(values) for name, values in stats.items()}
     stats["summary"] = {
-        name: {"mean": float(v.mean()), "std": float(v.std()), "min": float(v.min()), "max": float(v.max())}
-        for name, v in stats.items()
+        name: {"mean": float(v.mean()), "std": float(v.std()), "min": float(v.min()), "max": float(v.max())} for name, v in stats.items()
     }
     return stats
 

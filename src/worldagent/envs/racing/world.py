@@ -66,9 +66,7 @@ class Track:
         """Host-side check of shapes, finiteness, bounds and closure; raises ``WorldagentError``."""
         centreline = check_finite("track centreline", self.centreline)
         if centreline.ndim < 2 or centreline.shape[-1] != 2 or centreline.shape[-2] < 8:
-            raise WorldagentError(
-                f"track centreline has shape {centreline.shape}; expected (K, 2) with K >= 8 points."
-            )
+            raise WorldagentError(f"track centreline has shape {centreline.shape}; expected (K, 2) with K >= 8 points.")
         batch = centreline.shape[:-2]
         for name, value, want in (
             ("raster", self.raster, (RASTER_SIZE, RASTER_SIZE)),

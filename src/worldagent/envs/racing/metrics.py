@@ -15,7 +15,8 @@ allowed step after paying every step penalty (backward driving below it is clipp
 start scores (−300.2 + 360) / 460 = 0.13 and a 200-step lap 0.91, which sits with the paper's
 racing figures (minimum 0.13, average 0.87, maximum 0.99, §6.1.1–6.1.2).
 
-Resource Harvest's scaling belongs with its own agents (the harvest DQN issue).
+Resource Harvest has no rule-given range; reports normalise it by the run's best episode
+(``registry.Metrics.normalise``).
 """
 
 from __future__ import annotations

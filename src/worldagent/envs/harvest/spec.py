@@ -1,0 +1,207 @@
+"""Resource Harvest's registration: what the upper layers need to know about it (``registry.EnvSpec``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worldagent.envs.harvest.env import NUM_AGENTS
+from worldagent.envs.harvest.repair import HarvestRepair
+from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
+from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
+from worldagent.errors import WorldagentError
+
+
+def parse_tagger(text: str) -> tuple[int, ...]:
+    """``"0"`` or ``"0,2"`` -> the agents allowed to TAG; ``"none"`` or ``""`` -> nobody."""
+    text = text.strip().lower()
+    if text in ("", "none"):
+        return ()
+    try:
+        return tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise ValueError(f"{text!r} is not a list of agent indices") from None
+
+
+def taggers(value) -> tuple[int, ...]:
+    """The tagger option as a tuple of agent indices (None, an int or a sequence), checked."""
+    chosen = () if value is None else (value,) if isinstance(value, (int, np.integer)) else tuple(value)
+    if any(isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < NUM_AGENTS for i in chosen):
+        raise WorldagentError(f"tagger {value!r}: agents are numbered 0 to {NUM_AGENTS - 1}.")
+    return tuple(int(i) for i in chosen)
+
+
+def make(options):
+    """``Harvest()`` and params in which the agents of ``options["tagger"]`` may TAG (paper §6.2.2)."""
+    from worldagent.envs.harvest.env import Harvest, make_params
+
+    chosen = taggers(options.get("tagger"))
+    return Harvest(), make_params(can_tag=[i in chosen for i in range(NUM_AGENTS)])
+
+
+def generate(seeds):
+    """The paper's corner-region map generator (``maps.generate_maps``)."""
+    from worldagent.envs.harvest.maps import generate_maps
+
+    return generate_maps(seeds)
+
+
+def cells(maps) -> np.ndarray:
+    """uint8[N, 2·H·W]: each map's wall grid and apple grid."""
+    grids = np.stack([np.asarray(maps.walls), np.asarray(maps.apples)], axis=1)
+    return grids.reshape(len(grids), -1).astype(np.uint8)
+
+
+def wall_share(world) -> float:
+    """Fraction of the cells that are walls."""
+    return float(np.asarray(world.walls, bool).mean())
+
+
+def tagger_isolated(world) -> float:
+    """1.0 when walls cut agent 0's corner off from every other corner (paper Figure 8b), else 0.0."""
+    from scipy.ndimage import label
+
+    walls = np.asarray(world.walls, bool)
+    regions, _ = label(~walls)
+    corners = [regions[r, c] for r, c in spawn_corners(*walls.shape)]
+    return float(all(corner != corners[0] for corner in corners[1:]))
+
+
+def apple_clustering(world) -> float:
+    """Mean number of apples among each apple's 8 neighbours (regrowth depends on it)."""
+    apples = np.asarray(world.apples, bool)
+    if not apples.any():
+        return 0.0
+    padded = np.pad(apples, 1).astype(np.int32)
+    neighbours = sum(np.roll(np.roll(padded, dr, 0), dc, 1) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc)[1:-1, 1:-1]
+    return float(neighbours[apples].mean())
+
+
+def trace(state):
+    """(positions i32[4, 2], present bool[4]): agents are off the map while tagged out."""
+    return state.position, state.tagged_timer == 0
+
+
+def world_picture(world, size: int):
+    from PIL import Image
+
+    from worldagent.envs.harvest.render import draw_map
+
+    image = draw_map(world, cell=max(1, size // np.shape(world.walls)[-1]), agents=True)
+    return image.resize((size, size), Image.NEAREST)
+
+
+def draw_episodes(axis, world, episodes) -> None:
+    from worldagent.envs.harvest.render import draw_episodes as draw
+
+    draw(axis, world, episodes)
+
+
+def sheet(worlds, path):
+    from worldagent.envs.harvest.render import draw_map_sheet
+
+    return draw_map_sheet(worlds, path)
+
+
+def uniform(env, params) -> ScriptedPolicy:
+    """Uniformly random actions for the four agents."""
+    from worldagent.envs.harvest.policies import random_act
+
+    return ScriptedPolicy(None, lambda p, obs, key, state: random_act(p, obs, key))
+
+
+def greedy(env, params) -> ScriptedPolicy:
+    """Each agent walks to the nearest apple it sees."""
+    from worldagent.envs.harvest.policies import greedy_policy
+
+    act = greedy_policy(env)
+    return ScriptedPolicy(None, lambda p, obs, key, state: act(p, obs, key))
+
+
+def _budgets(**values):
+    return values
+
+
+SPEC = register(
+    EnvSpec(
+        name="harvest",
+        description="Resource Harvest (paper §5.1.2): four agents gather regrowing apples; one may TAG the others out.",
+        make=make,
+        options=(EnvOption("tagger", "agents allowed to TAG, e.g. 0 or 0,2 (the paper's influencing experiment: 0)", parse_tagger, ()),),
+        world_type=HarvestMap,
+        generate=generate,
+        cells=cells,
+        cell_shape=(2, DEFAULT_SIZE, DEFAULT_SIZE),
+        repair=HarvestRepair.from_dataset,
+        metrics=Metrics(
+            main="group_reward",
+            names=("group_reward", "conflict", "equality", "sustainability", "peace"),
+            compared=("group_reward", "conflict", "equality"),
+            highlighted=("conflict", "equality"),
+            descriptors={"wall_share": wall_share, "tagger_isolated": tagger_isolated, "apple_clustering": apple_clustering},
+            default_descriptors=("wall_share", "apple_clustering"),
+        ),
+        trace=trace,
+        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet),
+        scripted={"random": uniform, "greedy": greedy},
+        algorithms=("dqn",),
+        presets={
+            "paper": _budgets(
+                worlds=10_000,
+                vae_epochs=25,
+                episodes=5_000,
+                random_worlds=1_000,
+                strategic_budget=1_050,
+                compare_budget=525,
+                bo_budget=105,
+                compare_seeds=(0, 1, 2),
+                influence_candidates=1_000,
+                influence_episodes=5_000,
+                influence_eval_worlds=1_000,
+                influence_seeds=(0, 1, 2),
+                influence_search_budget=525,
+            ),
+            "quick": _budgets(
+                worlds=5_000,
+                vae_epochs=10,
+                episodes=1_000,
+                random_worlds=200,
+                strategic_budget=105,
+                compare_budget=42,
+                bo_budget=21,
+                compare_seeds=(0,),
+                influence_candidates=200,
+                influence_episodes=400,
+                influence_eval_worlds=50,
+                influence_seeds=(0,),
+                influence_search_budget=210,
+                learning_starts=4_000,
+            ),
+            "tiny": _budgets(
+                worlds=256,
+                vae_epochs=3,
+                episodes=4,
+                random_worlds=8,
+                strategic_budget=21,
+                compare_budget=0,
+                compare_seeds=(0,),
+                influence_candidates=8,
+                influence_episodes=4,
+                influence_eval_worlds=4,
+                influence_seeds=(0,),
+                train_envs=4,
+                learning_starts=1_000,
+            ),
+        },
+        reproduce_options={"tagger": (0,)},
+        selection="conflict == 0",
+        paper={
+            "random.mean_normalised": 0.61,
+            "min.normalised": 0.05,
+            "max.normalised": 0.92,
+            "influence.conflict.default": 0.51,
+            "influence.conflict.influenced": 0.05,
+            "influence.equality.default": 0.33,
+            "influence.equality.influenced": 0.78,
+        },
+    )
+)

@@ -1,0 +1,206 @@
+"""Particle Racing's registration: what the upper layers need to know about it (``registry.EnvSpec``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worldagent.envs.registry import EnvSpec, Metrics, Pictures, ScriptedPolicy, register
+from worldagent.envs.repairs import NearestWorld
+
+CORNER_SPAN = 8  # centreline segments over which a corner's turning is summed (256 per lap)
+
+
+def make(options):
+    """``ParticleRacing()`` and its default params (racing has no options yet)."""
+    from worldagent.envs.racing.env import ParticleRacing
+
+    del options
+    env = ParticleRacing()
+    return env, env.default_params
+
+
+def generate(seeds):
+    """CarRacing's procedural generator (``tracks.generate_tracks``)."""
+    from worldagent.envs.racing.tracks import generate_tracks
+
+    return generate_tracks(seeds)
+
+
+def cells(tracks) -> np.ndarray:
+    """uint8[N, 64·64]: each track's 64×64 footprint raster (paper §5.2.1)."""
+    raster = np.asarray(tracks.raster)
+    return raster.reshape(len(raster), -1).astype(np.uint8)
+
+
+def derive(metrics: dict, params) -> dict:
+    """Add the normalised return (paper §6)."""
+    from worldagent.envs.racing.metrics import normalised_return
+
+    return {**metrics, "normalised_return": np.asarray(normalised_return(metrics["return"], params))}
+
+
+def bounds(params) -> tuple[float, float]:
+    from worldagent.envs.racing.metrics import racing_return_bounds
+
+    return racing_return_bounds(params)
+
+
+def _turning(centreline: np.ndarray) -> np.ndarray:
+    """f64[K]: the signed turn (radians) at each point of a closed centreline."""
+    heading = np.diff(centreline, axis=0, append=centreline[:1])
+    angle = np.arctan2(heading[:, 1], heading[:, 0])
+    return (np.diff(angle, append=angle[:1]) + np.pi) % (2 * np.pi) - np.pi
+
+
+def total_curvature(track) -> float:
+    """Σ |turn| over the lap, radians (2π for a convex track; more for wiggles)."""
+    return float(np.abs(_turning(np.asarray(track.centreline, np.float64))).sum())
+
+
+def sharpest_corner(track) -> float:
+    """The largest |turn| over ``CORNER_SPAN`` consecutive segments, radians."""
+    turn = _turning(np.asarray(track.centreline, np.float64))
+    window = np.convolve(np.concatenate([turn, turn[: CORNER_SPAN - 1]]), np.ones(CORNER_SPAN), mode="valid")
+    return float(np.abs(window).max())
+
+
+def track_length(track) -> float:
+    """Lap length in normalised units (the playfield is 2 wide)."""
+    centreline = np.asarray(track.centreline, np.float64)
+    return float(np.linalg.norm(np.diff(centreline, axis=0, append=centreline[:1]), axis=1).sum())
+
+
+def trace(state):
+    """(position f32[2], present) of the particle."""
+    import jax.numpy as jnp
+
+    return state.position, jnp.bool_(True)
+
+
+def world_picture(world, size: int):
+    from worldagent.envs.racing.render import track_image
+
+    return track_image(world, size=size)
+
+
+def draw_episodes(axis, world, episodes) -> None:
+    from worldagent.envs.racing.render import draw_episodes as draw
+
+    draw(axis, world, episodes)
+
+
+def sheet(worlds, path):
+    from worldagent.envs.racing.render import draw_track_sheet
+
+    return draw_track_sheet(worlds, path)
+
+
+def driver(env, params) -> ScriptedPolicy:
+    """The reference driver: follows the centreline from the env state (privileged)."""
+    from worldagent.envs.racing.driver import DriverParams, driver_action
+
+    return ScriptedPolicy((params, DriverParams()), lambda p, obs, key, state: driver_action(state, *p), privileged=True)
+
+
+def uniform(env, params) -> ScriptedPolicy:
+    """Uniformly random actions."""
+    import jax
+
+    return ScriptedPolicy(None, lambda p, obs, key, state: jax.random.randint(key, (), 0, env.num_actions))
+
+
+def episode_note(metrics: dict) -> str:
+    """ ", 6/8 episodes crashed"."""
+    crashed = np.asarray(metrics.get("crashed", []), bool)
+    return f", {int(crashed.sum())}/{len(crashed)} episodes crashed" if len(crashed) else ""
+
+
+def _budgets(**values):
+    return values
+
+
+SPEC = register(
+    EnvSpec(
+        name="racing",
+        description="Particle Racing (paper §5.1.1): one particle laps a CarRacing track; leaving the road is a crash.",
+        make=make,
+        world_type=__import__("worldagent.envs.racing.world", fromlist=["Track"]).Track,
+        generate=generate,
+        cells=cells,
+        cell_shape=(64, 64),
+        repair=NearestWorld.from_dataset,
+        metrics=Metrics(
+            main="return",
+            names=("return", "normalised_return", "crashed", "lap_completed", "progress", "steps"),
+            aliases={"crash_rate": "crashed", "lap_rate": "lap_completed"},
+            derive=derive,
+            bounds=bounds,
+            compared=("return", "normalised_return", "crashed", "lap_completed"),
+            highlighted=("crashed",),
+            descriptors={"total_curvature": total_curvature, "sharpest_corner": sharpest_corner, "track_length": track_length},
+            default_descriptors=("total_curvature", "sharpest_corner"),
+        ),
+        trace=trace,
+        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet),
+        scripted={"driver": driver, "random": uniform},
+        algorithms=("ppo", "acktr"),
+        presets={
+            "paper": _budgets(
+                worlds=10_000,
+                vae_epochs=25,
+                episodes=10_000,
+                random_worlds=1_000,
+                strategic_budget=2_100,
+                compare_budget=1_050,
+                bo_budget=210,
+                compare_seeds=(0, 1, 2),
+                influence_candidates=1_000,
+                influence_episodes=10_000,
+                influence_eval_worlds=1_000,
+                influence_seeds=(0, 1, 2),
+                influence_selection="crash_rate > 0",
+            ),
+            "quick": _budgets(
+                worlds=10_000,
+                vae_epochs=10,
+                episodes=10_000,
+                random_worlds=1_000,
+                strategic_budget=420,
+                compare_budget=210,
+                bo_budget=42,
+                compare_seeds=(0, 1),
+                influence_candidates=500,
+                influence_episodes=10_000,
+                influence_eval_worlds=200,
+                influence_seeds=(0,),
+                influence_selection="crash_rate > 0",
+            ),
+            "tiny": _budgets(
+                worlds=256,
+                vae_epochs=3,
+                episodes=64,
+                random_worlds=42,
+                strategic_budget=21,
+                compare_budget=21,
+                compare_seeds=(0,),
+                influence_candidates=42,
+                influence_episodes=64,
+                influence_eval_worlds=21,
+                influence_seeds=(0,),
+                train_envs=8,
+            ),
+        },
+        selection="crash_rate > 0.5",
+        paper={
+            "random.mean_normalised": 0.87,
+            "random.crashed": 0.11,
+            "min.normalised": 0.13,
+            "max.normalised": 0.99,
+            "max.crashed": 0.0,
+            "influence.crashed.default": 0.11,
+            "influence.crashed.influenced": 0.04,
+            "influence.reward_change_pct": -5.0,
+        },
+        episode_note=episode_note,
+    )
+)

@@ -156,6 +156,8 @@ class EnvSpec:
         selection: the paper's influencing selection (``"crash_rate > 0.5"``).
         paper: the paper's figures, for the report's "ours vs paper" table (key -> value).
         episode_note: ``episodes' metrics {name: [E]} -> str``: a few words on how episodes ended.
+        raw_decode: ``logits f32[B, D] -> worlds`` without repair (thresholded cells), for the
+            generator's "valid before repair" figure; None when cells do not determine a world.
     """
 
     name: str
@@ -178,6 +180,7 @@ class EnvSpec:
     selection: str = ""
     paper: Mapping[str, float] = field(default_factory=dict)
     episode_note: Callable[[dict], str] | None = None
+    raw_decode: Callable[[Any], Any] | None = None
 
     @property
     def default_algorithm(self) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worldagent.envs.harvest.env import NUM_AGENTS
-from worldagent.envs.harvest.repair import HarvestRepair
+from worldagent.envs.harvest.repair import HarvestRepair, threshold_maps
 from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
 from worldagent.errors import WorldagentError
@@ -193,6 +193,7 @@ SPEC = register(
             ),
         },
         reproduce_options={"tagger": (0,)},
+        raw_decode=lambda logits: threshold_maps(np.asarray(logits).reshape(len(logits), 2, DEFAULT_SIZE, DEFAULT_SIZE)),
         selection="conflict == 0",
         paper={
             "random.mean_normalised": 0.61,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.worlds.dataset import FORMAT_VERSION, WorldDataset, make_dataset
 
@@ -21,9 +22,11 @@ def test_round_trip_is_exact(tmp_path, env, racing_data, harvest_data):
 
 
 def test_worlds_are_the_generators_and_deterministic(racing_data):
-    again = make_dataset("racing", 4, 0, progress=False)
+    again = make_dataset(registry.get("racing"), 4, 0, progress=False)  # a spec works as well as a name
+    assert again.env == "racing" and again.cell_shape == registry.get("racing").cell_shape
     np.testing.assert_array_equal(again.cells, racing_data.cells[:4])
     assert racing_data.cells.shape == (256, 64 * 64) and racing_data.cells.dtype == np.uint8
+    np.testing.assert_array_equal(registry.get("racing").cells(again.worlds), again.cells)
 
 
 def _rewrite(path, tmp_path, **changes):
@@ -52,7 +55,12 @@ def test_bad_files_are_refused_with_a_clear_message(tmp_path, racing_data):
             WorldDataset.load(path)
         assert "\n" not in str(error.value) and "worldagent dataset" in str(error.value)
     with pytest.raises(WorldagentError, match="not harvest worlds"):
-        WorldDataset.load(good, env="harvest")
+        WorldDataset.load(good, env=registry.get("harvest"))
+    with pytest.raises(WorldagentError, match="unknown environment 'chess'") as error:
+        WorldDataset.load(_rewrite(good, tmp_path, env=np.str_("chess")))
+    assert str(error.value).startswith(f"dataset file {tmp_path}") and "\n" not in str(error.value)
+    with pytest.raises(WorldagentError, match="unknown environment 'chess'"):
+        WorldDataset.load(good, env="chess")
     flipped = racing_data.cells[:8].copy()
     flipped[0, 0] ^= 1
     with pytest.raises(WorldagentError, match="do not match"):

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from worldagent.envs import registry
+from worldagent.envs.harvest.repair import HarvestRepair
+from worldagent.envs.repairs import NearestWorld
 from worldagent.errors import WorldagentError
 from worldagent.worlds.generator import build_generator, load_generator, save_generator
-from worldagent.worlds.quality import harvest_figures, racing_figures
+from worldagent.worlds.quality import figures
 
 
 @pytest.mark.parametrize("which", ["racing", "harvest"])
@@ -24,20 +29,39 @@ def test_generator_runs_under_jit_and_vmap(which, request):
         np.testing.assert_array_equal(np.asarray(getattr(mapped, name))[:, 0], getattr(eager, name))
 
 
+def test_generator_is_repair_of_the_decoded_logits(harvest_generator):
+    z = jax.random.normal(jax.random.key(2), (5, harvest_generator.latent_dim))
+    direct = harvest_generator.repair(harvest_generator.logits(z))
+    for name in vars(direct):
+        np.testing.assert_array_equal(getattr(harvest_generator(z), name), getattr(direct, name))
+    assert harvest_generator.env == "harvest" and harvest_generator.cell_shape == (2, 25, 25)
+
+
 def test_racing_generator_returns_dataset_tracks(racing_generator, racing_data):
+    assert isinstance(racing_generator.repair, NearestWorld)
     z = jax.random.normal(jax.random.key(3), (8, racing_generator.latent_dim))
-    index = np.asarray(racing_generator.track_indices(z))
+    index = np.asarray(racing_generator.repair.indices(racing_generator.logits(z)))
     tracks = racing_generator(z)
     np.testing.assert_array_equal(np.asarray(tracks.centreline), racing_data.worlds.centreline[index])
     np.testing.assert_array_equal(np.asarray(tracks.road), racing_data.worlds.road[index])
 
 
 def test_harvest_generator_maps_are_valid_with_the_median_apple_count(harvest_generator, harvest_data):
+    assert isinstance(harvest_generator.repair, HarvestRepair)
     maps = harvest_generator(jax.random.normal(jax.random.key(4), (32, harvest_generator.latent_dim)))
     counts = np.asarray(maps.apples).reshape(32, -1).sum(1)
     median = int(np.median(harvest_data.worlds.apples.reshape(len(harvest_data), -1).sum(1)))
-    assert (counts == median).all() and harvest_generator.apples == median
+    assert (counts == median).all() and harvest_generator.repair.config == {"apples": median}
     maps.validate()
+
+
+def test_repair_config_sets_the_apple_count_and_is_checked(harvest_vae, harvest_data):
+    generator = build_generator(harvest_vae, harvest_data, repair_config={"apples": 7})
+    maps = generator(jnp.zeros((3, generator.latent_dim)))
+    assert (np.asarray(maps.apples).reshape(3, -1).sum(1) == 7).all()
+    for bad in (-1, 25 * 25):
+        with pytest.raises(WorldagentError, match="apples="):
+            build_generator(harvest_vae, harvest_data, repair_config={"apples": bad})
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
@@ -63,19 +87,48 @@ def test_a_generator_needs_the_vaes_own_dataset(racing_vae, harvest_data):
 def test_save_and_load_give_the_same_generator(tmp_path, racing_vae, racing_data, racing_generator):
     dataset_path = racing_data.save(tmp_path / "data.npz")
     save_generator(tmp_path / "g", racing_vae, dataset_path, racing_generator)
+    meta = json.loads((tmp_path / "g" / "generator.json").read_text())
+    assert meta["env"] == "racing" and meta["repair"] == {} and meta["fingerprint"] == racing_data.fingerprint
     loaded, _, _ = load_generator(tmp_path / "g")
     z = jax.random.normal(jax.random.key(5), (8, racing_generator.latent_dim))
-    np.testing.assert_array_equal(loaded.track_indices(z), racing_generator.track_indices(z))
+    np.testing.assert_array_equal(loaded.repair.indices(loaded.logits(z)), racing_generator.repair.indices(racing_generator.logits(z)))
     with pytest.raises(WorldagentError, match="holds no generator"):
         load_generator(tmp_path / "elsewhere")
 
 
-def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_generator):
-    racing = racing_figures(racing_generator, racing_data, 500, jax.random.key(0))
-    assert 0.0 <= racing["self_mapping_rate"] <= 1.0
+def test_the_repair_config_survives_save_and_load_and_old_files_load(tmp_path, harvest_vae, harvest_data):
+    dataset_path = harvest_data.save(tmp_path / "data.npz")
+    save_generator(tmp_path / "g", harvest_vae, dataset_path, build_generator(harvest_vae, harvest_data, repair_config={"apples": 9}))
+    assert load_generator(tmp_path / "g")[0].repair.config == {"apples": 9}
+    meta = json.loads((tmp_path / "g" / "generator.json").read_text())
+    del meta["repair"]
+    median = build_generator(harvest_vae, harvest_data).repair.apples
+    for apples, expected in ((11, 11), (0, median)):  # old files recorded "apples": K, or 0 for the default
+        (tmp_path / "g" / "generator.json").write_text(json.dumps({**meta, "apples": apples}))
+        assert load_generator(tmp_path / "g")[0].repair.config == {"apples": expected}
+
+
+def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_generator, harvest_data):
+    racing = figures(racing_generator, racing_data, 500, jax.random.key(0))
     assert racing["self_mapping_rate"] > 5 / len(racing_data)  # far above chance
-    assert 1 < racing["coverage_distinct_tracks"] <= len(racing_data)
-    harvest = harvest_figures(harvest_generator, 200, jax.random.key(0))
+    assert 1 < racing["coverage_distinct_worlds"] == racing["distinct_layouts"] <= len(racing_data)
+    assert racing["coverage_fraction"] == racing["coverage_distinct_worlds"] / len(racing_data)
+    assert racing["validity_after_repair"] == 1.0 and "validity_before_repair" not in racing  # racing has no raw decode
+    assert 1 / 500 <= racing["most_reached_share"] <= 1.0 and racing["samples"] == 500
+    harvest = figures(harvest_generator, harvest_data, 200, jax.random.key(0))
     assert harvest["validity_after_repair"] == 1.0
     assert 0.0 <= harvest["validity_before_repair"] <= 1.0
-    assert harvest["distinct_wall_layouts"] >= 1
+    assert 0.0 <= harvest["self_mapping_rate"] <= 1.0
+    assert harvest["distinct_layouts"] >= 1 and harvest["mean_cell_hamming"] >= 0.0
+    with pytest.raises(WorldagentError, match="at least 1"):
+        figures(harvest_generator, harvest_data, 0, jax.random.key(0))
+
+
+def test_self_mapping_agrees_with_the_nearest_world_indices(racing_generator, racing_data):
+    """By cells, a world maps back to itself when the repair picks it (or an identical duplicate)."""
+    from worldagent.worlds.quality import _self_mapping_rate
+
+    subset = racing_data.subset(np.arange(64))
+    own = np.asarray(racing_generator.repair.indices(racing_generator.logits(racing_generator.encode(subset.cells))))
+    rate = _self_mapping_rate(racing_generator, subset, registry.get("racing"))
+    assert rate >= np.mean(own == np.arange(64)) and rate * 64 == pytest.approx(round(rate * 64))

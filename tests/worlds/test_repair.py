@@ -9,26 +9,51 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from worldagent.envs.harvest.repair import HarvestRepair, repair_maps
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
-from worldagent.worlds.repair import nearest_track, repair_harvest
+from worldagent.envs.repairs import NearestWorld, nearest_index
+from worldagent.errors import WorldagentError
 
 SIZE = 25
-repair = jax.jit(repair_harvest, static_argnums=1)
+repair = jax.jit(repair_maps, static_argnums=1)
 
 
 def test_a_tracks_own_raster_maps_to_itself(racing_data):
     rasters = jnp.asarray(racing_data.cells, jnp.float32)
     confident = 10.0 * (2.0 * rasters - 1.0)  # the raster itself, as sharp logits
-    np.testing.assert_array_equal(nearest_track(confident, rasters), np.arange(len(rasters)))
+    np.testing.assert_array_equal(nearest_index(confident, rasters), np.arange(len(rasters)))
 
 
 def test_any_logits_map_to_a_dataset_track_the_most_probable_one(racing_data):
     rasters = jnp.asarray(racing_data.cells, jnp.float32)
     logits = jax.random.normal(jax.random.key(0), (16, rasters.shape[1])) * 3.0
-    index = np.asarray(nearest_track(logits, rasters))
+    index = np.asarray(nearest_index(logits, rasters))
     assert ((0 <= index) & (index < len(rasters))).all()
     log_likelihood = np.asarray(rasters) @ np.asarray(logits).T - np.logaddexp(0.0, np.asarray(logits)).sum(1)  # [N, B]
     np.testing.assert_array_equal(index, log_likelihood.argmax(axis=0))
+
+
+def test_nearest_world_returns_the_dataset_worlds_under_jit(racing_data):
+    subset = racing_data.subset(np.arange(32))
+    nearest = NearestWorld.from_dataset(subset, {})
+    logits = 10.0 * (2.0 * jnp.asarray(subset.cells[[5, 0, 31]], jnp.float32) - 1.0)
+    tracks = jax.jit(lambda fix, logits: fix(logits))(nearest, logits)
+    np.testing.assert_array_equal(np.asarray(tracks.centreline), subset.worlds.centreline[[5, 0, 31]])
+    np.testing.assert_array_equal(nearest.indices(logits), [5, 0, 31])
+    assert nearest.config == {} and NearestWorld.from_dataset(subset, nearest.config).cells.shape == (32, 64 * 64)
+
+
+def test_harvest_repair_from_a_dataset(harvest_data):
+    default = HarvestRepair.from_dataset(harvest_data, {})
+    median = int(np.median(harvest_data.worlds.apples.reshape(len(harvest_data), -1).sum(1)))
+    assert default.config == {"apples": median} and default.grid == (SIZE, SIZE)
+    assert HarvestRepair.from_dataset(harvest_data, default.config) == default
+    logits = jax.random.normal(jax.random.key(2), (4, 2 * SIZE * SIZE))  # flat, as the decoder gives them
+    maps = jax.jit(lambda fix, logits: fix(logits))(HarvestRepair.from_dataset(harvest_data, {"apples": 12}), logits)
+    for i in range(4):
+        assert_valid_with_k_apples(maps.walls[i], maps.apples[i], 12)
+    with pytest.raises(WorldagentError, match="apples=10000; pick between 1 and 621"):
+        HarvestRepair.from_dataset(harvest_data, {"apples": 10_000})
 
 
 def assert_valid_with_k_apples(walls, apples, k):
@@ -65,7 +90,7 @@ def test_random_logits_give_valid_maps_with_exactly_k_apples(seed, scale, k):
     np.testing.assert_array_equal(repaired.walls, walls & ~np.asarray(repaired.apples))  # walls kept unless cleared for apples
 
 
-def test_repair_batches(harvest_generator):
+def test_repair_batches():
     logits = jax.random.normal(jax.random.key(1), (6, 2, SIZE, SIZE))
     batched = repair(logits, 20)
     for i in range(6):

@@ -3,9 +3,9 @@
 A dataset file is one ``.npz`` (loaded with ``allow_pickle=False``) holding::
 
     format_version  int, FORMAT_VERSION
-    env             str, "racing" or "harvest"
+    env             str, the registered environment's name ("racing", "harvest", ...)
     seeds           int64[N], the generator seed of each world
-    cells           uint8[N, D], each world's binary VAE input (see ``kinds.py``)
+    cells           uint8[N, D], each world's binary VAE input (``EnvSpec.cells``)
     cell_shape      int[...], the shape of one world's cells before flattening
     world/<field>   the world pytree's fields, each with leading axis N
 
@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from worldagent.envs import registry
+from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
 from worldagent.files import write_atomically
-from worldagent.worlds.kinds import ENV_NAMES, world_kind
 
 FORMAT_VERSION = 1
 GENERATION_CHUNK = 1000  # worlds generated per progress-bar tick
@@ -36,8 +37,8 @@ class WorldDataset:
     """Worlds, their VAE cells and their seeds.
 
     Attributes:
-        env: "racing" or "harvest".
-        seeds: int64[N] generator seeds; world i is ``kind.generate([seeds[i]])``.
+        env: the environment's registered name (``registry.get(env)`` is its spec).
+        seeds: int64[N] generator seeds; world i is ``spec.generate([seeds[i]])``.
         worlds: the batched world pytree (numpy arrays, leading axis N).
         cells: uint8[N, D] binary VAE input.
         cell_shape: shape of one world's cells before flattening.
@@ -86,10 +87,11 @@ class WorldDataset:
         return write_atomically(path, save)
 
     @classmethod
-    def load(cls, path: Path | str, env: str | None = None) -> WorldDataset:
-        """Read and check a dataset file; ``env``, if given, must match the file's."""
+    def load(cls, path: Path | str, env: str | EnvSpec | None = None) -> WorldDataset:
+        """Read and check a dataset file; ``env`` (a name or a spec), if given, must match the file's."""
         path = Path(path)
-        remedy = f"make it again with `worldagent dataset {env or 'racing|harvest'} --out {path}`"
+        env = None if env is None else registry.get(env).name
+        remedy = f"make it again with `worldagent dataset {env or '|'.join(registry.names())} --out {path}`"
         if not path.is_file():
             raise WorldagentError(f"dataset file {path} does not exist; {remedy}.")
         try:
@@ -108,42 +110,45 @@ class WorldDataset:
         if version != FORMAT_VERSION:
             raise WorldagentError(f"dataset file {path} has format version {version}, this worldagent reads version {FORMAT_VERSION}; {remedy}.")
         file_env = str(arrays["env"])
-        if file_env not in ENV_NAMES:
-            raise WorldagentError(f"dataset file {path} is for unknown environment {file_env!r}; {remedy}.")
         if env is not None and env != file_env:
             raise WorldagentError(f"dataset file {path} holds {file_env} worlds, not {env} worlds; pass a {env} dataset.")
-        kind = world_kind(file_env)
+        try:
+            spec = registry.get(file_env)
+        except WorldagentError as error:
+            raise WorldagentError(f"dataset file {path}: {error}") from None
         seeds, cells = arrays["seeds"], arrays["cells"]
         cell_shape = tuple(int(s) for s in arrays["cell_shape"])
         fields = {name[len("world/") :]: value for name, value in arrays.items() if name.startswith("world/")}
-        world_type = type(kind.generate(np.zeros(1, np.int64)))
-        expected = {f.name for f in dataclasses.fields(world_type)}
+        expected = {f.name for f in dataclasses.fields(spec.world_type)}
         if set(fields) != expected:
             raise WorldagentError(f"dataset file {path} has world fields {sorted(fields)}, expected {sorted(expected)}; {remedy}.")
         n = len(seeds)
         bad = [name for name, value in fields.items() if len(value) != n]
-        if seeds.ndim != 1 or cells.shape != (n, int(np.prod(cell_shape))) or bad or cell_shape != kind.cell_shape:
+        if seeds.ndim != 1 or cells.shape != (n, int(np.prod(cell_shape))) or bad or cell_shape != tuple(spec.cell_shape):
             raise WorldagentError(
                 f"dataset file {path} is inconsistent (seeds {seeds.shape}, cells {cells.shape}, cell shape {cell_shape}, "
                 f"fields of the wrong length: {bad or 'none'}); {remedy}."
             )
-        worlds = world_type(**fields)
+        worlds = spec.world_type(**fields)
         dataset = cls(file_env, seeds.astype(np.int64), worlds, cells.astype(np.uint8), cell_shape)
-        if not np.array_equal(kind.cells(worlds), dataset.cells):
+        if not np.array_equal(spec.cells(worlds), dataset.cells):
             raise WorldagentError(f"dataset file {path} has cells that do not match its worlds; {remedy}.")
         return dataset
 
 
-def make_dataset(env: str, n: int, seed: int, progress: bool = True) -> WorldDataset:
+def make_dataset(env: str | EnvSpec, n: int, seed: int, progress: bool = True) -> WorldDataset:
     """Generate ``n`` worlds of ``env`` with seeds ``seed, seed+1, ...`` (paper §5.2.1).
 
     Args:
-        env: "racing" or "harvest".
+        env: a registered environment's name, or its ``EnvSpec``.
         n: number of worlds (the paper: 10,000).
         seed: first generator seed.
         progress: show a progress bar.
+
+    Returns:
+        The dataset: ``seeds`` int64[n], ``worlds`` (leading axis n), ``cells`` uint8[n, D].
     """
-    kind = world_kind(env)
+    spec = registry.get(env)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise WorldagentError(f"n={n!r}; ask for at least 1 world.")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -152,12 +157,12 @@ def make_dataset(env: str, n: int, seed: int, progress: bool = True) -> WorldDat
     chunks = []
     from worldagent.progress import progress_bar
 
-    with progress_bar(f"generating {n:,} {env} worlds", total=n, enabled=progress) as advance:
+    with progress_bar(f"generating {n:,} {spec.name} worlds", total=n, enabled=progress) as advance:
         for start in range(0, n, GENERATION_CHUNK):
-            chunks.append(kind.generate(seeds[start : start + GENERATION_CHUNK]))
+            chunks.append(spec.generate(seeds[start : start + GENERATION_CHUNK]))
             advance(len(seeds[start : start + GENERATION_CHUNK]))
-    worlds = _map_fields(chunks[0], lambda *leaves: np.concatenate(leaves), *chunks[1:])
-    return WorldDataset(env, seeds, worlds, kind.cells(worlds), kind.cell_shape)
+    worlds = _map_fields(chunks[0], lambda *leaves: np.concatenate([np.asarray(leaf) for leaf in leaves]), *chunks[1:])
+    return WorldDataset(spec.name, seeds, worlds, np.asarray(spec.cells(worlds), np.uint8), tuple(spec.cell_shape))
 
 
 def _fields(world: Any) -> dict[str, Any]:

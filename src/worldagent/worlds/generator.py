@@ -1,18 +1,23 @@
 """The World Agent's generator G(z) = repair(decoder(z)) (paper §4.2, Equation 3, Figure 3).
 
 ``Generator`` is a pytree: pass it *into* jitted code as an argument (it holds the decoder's
-weights and, for racing, the dataset's rasters and tracks, which must not be baked into a
-compiled program as constants). Calling it is pure and jittable::
+weights and the repair step's arrays, e.g. the dataset's worlds for a nearest-world repair,
+which must not be baked into a compiled program as constants). Calling it is pure and
+jittable::
 
     worlds = generator(z)          # z: f32[B, 10] -> a batch of B worlds
 
+The repair step is the environment's (``registry.get(env).repair(dataset, config)``); this
+module never asks which environment it serves.
+
 On a generator directory (``save``/``load``): ``vae.msgpack`` + ``vae.json`` (the VAE) and
-``generator.json`` (env, the dataset file and its fingerprint, the harvest apple count).
+``generator.json`` (env, the dataset file and its fingerprint, the repair's config).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,11 +26,11 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from worldagent.envs import registry
 from worldagent.envs.core import check_finite
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.worlds.dataset import WorldDataset
-from worldagent.worlds.repair import nearest_track, repair_harvest
 from worldagent.worlds.vae import VAE, TrainedVAE
 
 GENERATOR_FILE = "generator.json"
@@ -37,21 +42,18 @@ class Generator:
 
     Attributes:
         params: the VAE's parameters (the decoder's are used by G; the encoder's by ``encode``).
-        rasters: racing: f32[N, D] the dataset's rasters; harvest: unused (f32[0, 0]).
-        worlds: racing: the dataset's tracks (batched ``Track``); harvest: None.
+        repair: the environment's repair step, a pytree with ``__call__(logits f32[B, D]) ->
+            worlds[B]`` and a JSON-able ``config`` (``EnvSpec.repair``).
         model: the ``VAE`` module (static).
-        env: "racing" or "harvest" (static).
+        env: the environment's registered name (static).
         cell_shape: shape of one world's cells (static).
-        apples: harvest: K, the apple count of every generated map; racing: 0 (static).
     """
 
     params: Any
-    rasters: jax.Array
-    worlds: Any
+    repair: Any
     model: VAE = struct.field(pytree_node=False)
     env: str = struct.field(pytree_node=False)
     cell_shape: tuple = struct.field(pytree_node=False)
-    apples: int = struct.field(pytree_node=False, default=0)
 
     @property
     def latent_dim(self) -> int:
@@ -66,61 +68,54 @@ class Generator:
             check_finite("latents", z)
 
     def logits(self, z: jax.Array) -> jax.Array:
-        """f32[B, D] decoded Bernoulli logits of the cells."""
+        """f32[B, D] decoded Bernoulli logits of the cells for latents z f[B, latent_dim]."""
         self.check_latents(z)
         return self.model.apply({"params": self.params}, jnp.asarray(z, jnp.float32), method=VAE.decode)
 
     def encode(self, cells) -> jax.Array:
-        """f32[B, latent_dim]: the encoder's mean latent of each world's cells."""
+        """f32[B, latent_dim]: the encoder's mean latent of each world's cells f[B, D]."""
         return self.model.apply({"params": self.params}, jnp.asarray(cells, jnp.float32), method=VAE.encode)[0]
-
-    def track_indices(self, z: jax.Array) -> jax.Array:
-        """Racing: i32[B] the dataset index of the track G(z) returns."""
-        return nearest_track(self.logits(z), self.rasters)
 
     def __call__(self, z: jax.Array) -> Any:
         """A batch of B valid worlds for latents z f[B, latent_dim] (paper Equation 3)."""
-        if self.env == "racing":
-            index = self.track_indices(z)
-            return jax.tree_util.tree_map(lambda leaf: leaf[index], self.worlds)
-        logits = self.logits(z).reshape(-1, *self.cell_shape)
-        return repair_harvest(logits, self.apples)
+        return self.repair(self.logits(z))
 
 
-def median_apples(dataset: WorldDataset) -> int:
-    """The median apple count of a harvest dataset (the default K of harvest repair)."""
-    return int(np.median(np.asarray(dataset.worlds.apples).reshape(len(dataset), -1).sum(axis=1)))
+def _repair_config(meta: Mapping[str, Any]) -> dict:
+    """The repair config recorded in ``generator.json`` (old files recorded harvest's ``apples``)."""
+    if "repair" in meta:
+        return dict(meta["repair"] or {})
+    return {"apples": meta["apples"]} if meta.get("apples") else {}
 
 
-def build_generator(vae: TrainedVAE, dataset: WorldDataset, apples: int | None = None) -> Generator:
+def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None) -> Generator:
     """G(z) from a trained VAE and the dataset it was trained on.
 
     Args:
         vae: the trained VAE.
-        dataset: its training dataset (racing repair maps to these tracks).
-        apples: harvest only: K, the apples per map (default: the dataset's median).
+        dataset: its training dataset (the repair may map to its worlds or measure them).
+        repair_config: settings of the environment's repair (e.g. ``{"apples": K}`` for harvest);
+            None or ``{}``: the repair's defaults.
     """
     if vae.env != dataset.env or vae.fingerprint != dataset.fingerprint:
         raise WorldagentError(
             f"the VAE was trained on {vae.env} dataset {vae.fingerprint}, not on this {dataset.env} dataset {dataset.fingerprint}; "
             "pass the dataset it was trained on."
         )
-    if dataset.env == "racing":
-        rasters = jnp.asarray(dataset.cells, jnp.float32)
-        worlds = jax.tree_util.tree_map(jnp.asarray, dataset.worlds)
-        return Generator(vae.params, rasters, worlds, vae.model, "racing", tuple(vae.cell_shape), 0)
-    count = median_apples(dataset) if apples is None else int(apples)
-    free = int(np.prod(vae.cell_shape[1:])) - 4
-    if not 1 <= count <= free:
-        raise WorldagentError(f"apples={count}; pick between 1 and {free} (the non-corner cells of the map).")
-    return Generator(vae.params, jnp.zeros((0, 0)), None, vae.model, "harvest", tuple(vae.cell_shape), count)
+    repair = registry.get(dataset.env).repair(dataset, dict(repair_config or {}))
+    return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape))
 
 
 def save_generator(directory: Path | str, vae: TrainedVAE, dataset_path: Path | str, generator: Generator) -> Path:
-    """Write the VAE and ``generator.json`` (dataset file, fingerprint, apple count) to ``directory``."""
+    """Write the VAE and ``generator.json`` (env, dataset file, fingerprint, repair config) to ``directory``."""
     directory = Path(directory)
     vae.save(directory)
-    meta = {"env": generator.env, "dataset": str(Path(dataset_path).resolve()), "fingerprint": vae.fingerprint, "apples": generator.apples}
+    meta = {
+        "env": generator.env,
+        "dataset": str(Path(dataset_path).resolve()),
+        "fingerprint": vae.fingerprint,
+        "repair": dict(generator.repair.config),
+    }
     write_text(directory / GENERATOR_FILE, json.dumps(meta, indent=1))
     return directory
 
@@ -131,9 +126,7 @@ def load_generator(directory: Path | str, dataset_path: Path | str | None = None
     try:
         meta = json.loads((directory / GENERATOR_FILE).read_text())
     except (OSError, ValueError):
-        raise WorldagentError(
-            f"{directory} holds no generator; train one with `worldagent generator train racing|harvest --out {directory}`."
-        ) from None
+        raise WorldagentError(f"{directory} holds no generator; train one with `worldagent generator train ENV --out {directory}`.") from None
     vae = TrainedVAE.load(directory)
     dataset = WorldDataset.load(dataset_path or meta["dataset"], env=meta["env"])
-    return build_generator(vae, dataset, meta["apples"] or None), vae, dataset
+    return build_generator(vae, dataset, _repair_config(meta)), vae, dataset

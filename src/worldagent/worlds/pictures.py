@@ -14,6 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from worldagent.envs import registry
+from worldagent.envs.registry import EnvSpec
 from worldagent.files import save_png
 from worldagent.worlds.dataset import WorldDataset
 from worldagent.worlds.generator import Generator
@@ -21,24 +23,31 @@ from worldagent.worlds.generator import Generator
 LABEL = 14  # pixels above each tile for its caption
 
 
-def world_tile(env: str, world, size: int) -> Image.Image:
-    """One world drawn ``size×size`` as the env draws it (track on grass; walls and apples)."""
-    if env == "racing":
-        from worldagent.envs.racing.render import track_image
+def world_tile(env: str | EnvSpec, world, size: int) -> Image.Image:
+    """One unbatched world drawn ``size×size`` as its environment draws it (``spec.pictures.world``)."""
+    return registry.get(env).pictures.world(world, size).convert("RGB")
 
-        return track_image(world, size=size)
-    from worldagent.envs.harvest.render import draw_map
 
-    image = draw_map(world, cell=max(1, size // np.shape(world.walls)[-1]), agents=True)
-    return image.resize((size, size), Image.NEAREST)
+def _channels(probability: np.ndarray) -> np.ndarray:
+    """f[H, W']: a cell grid of any rank as one image, channels (leading axes) side by side, 1 px apart."""
+    if probability.ndim < 2:
+        return probability.reshape(1, -1)
+    grids = probability.reshape(-1, *probability.shape[-2:])
+    gap = np.ones((grids.shape[1], 1))
+    return np.concatenate([part for grid in grids for part in (gap, grid)][1:], axis=1)
 
 
 def probability_tile(logits: np.ndarray, cell_shape: tuple, size: int) -> Image.Image:
-    """Decoded cell probabilities as grey levels (harvest: walls and apples side by side)."""
+    """Decoded cell probabilities (logits f[D]) as grey levels, darker for likelier cells.
+
+    Args:
+        logits: f[D] one world's decoded logits.
+        cell_shape: one world's cell shape (``EnvSpec.cell_shape``), e.g. (64, 64), or (2, 25, 25)
+            whose leading channels (harvest: walls, apples) are drawn side by side.
+        size: the tile's side in pixels.
+    """
     probability = 1.0 / (1.0 + np.exp(-np.asarray(logits, np.float64).reshape(cell_shape)))
-    if probability.ndim == 3:  # harvest: [2, H, W] -> walls | apples
-        probability = np.concatenate([probability[0], np.ones((probability.shape[1], 1)), probability[1]], axis=1)
-    grey = Image.fromarray((255 * (1.0 - probability)).astype(np.uint8), mode="L").convert("RGB")
+    grey = Image.fromarray((255 * (1.0 - _channels(probability))).astype(np.uint8), mode="L").convert("RGB")
     return grey.resize((size, size), Image.NEAREST)
 
 

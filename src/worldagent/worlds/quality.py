@@ -1,27 +1,29 @@
 """How good is a generator? The figures ``worldagent generator report`` writes (paper §5.2.1).
 
-- reconstruction of held-out worlds: cell accuracy, on-cell IoU and negative log-likelihood
-  per world, each beside the same figure for the mean-image baseline (predict every world as
-  the training set's mean cells);
-- racing: self-mapping (the fraction of dataset tracks that encoder + G(z) maps back to
-  themselves) and coverage (how many distinct dataset tracks G reaches from z ~ N(0, I));
-- harvest: validity of decoded maps before repair (the thresholded decode passes
-  ``validate()``, and has exactly K apples), after repair (always 1), and the diversity of walls
-  among samples (distinct layouts, mean pairwise Hamming distance).
+- ``reconstruction``: on held-out worlds, cell accuracy, on-cell IoU and negative
+  log-likelihood per world, each beside the same figure for the mean-image baseline (predict
+  every world as the training set's mean cells);
+- ``figures``: self-mapping (the fraction of dataset worlds that G(encode(x)) maps back to
+  themselves), coverage (how many distinct worlds G reaches from z ~ N(0, I)), validity of
+  G(z) after repair and, where the spec has a ``raw_decode``, before it, and the diversity of
+  the samples' cells (distinct layouts, mean pairwise Hamming distance).
+
+Worlds are compared by their cells (``EnvSpec.cells``), so nothing here depends on the
+environment: racing's nearest-track repair and harvest's apple-count repair get the same figures.
 """
 
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.worlds.dataset import WorldDataset
 from worldagent.worlds.generator import Generator
-from worldagent.worlds.repair import threshold_harvest
 
 BATCH = 1000  # worlds per jitted call
+HAMMING_PAIRS = 10_000  # sample pairs for the mean Hamming distance
 
 
 def _batched(fn, array, *args):
@@ -35,17 +37,12 @@ def _reconstruct_logits(generator: Generator, cells):
 
 
 @jax.jit
-def _self_indices(generator: Generator, cells):
-    return generator.track_indices(generator.encode(cells))
+def _reconstruct_worlds(generator: Generator, cells):
+    return generator(generator.encode(cells))
 
 
 @jax.jit
-def _sample_indices(generator: Generator, z):
-    return generator.track_indices(z)
-
-
-@jax.jit
-def _sample_maps(generator: Generator, z):
+def _sample(generator: Generator, z):
     return generator(z), generator.logits(z)
 
 
@@ -63,7 +60,14 @@ def _cell_scores(logits: np.ndarray, cells: np.ndarray) -> dict:
 
 
 def reconstruction(generator: Generator, dataset: WorldDataset, holdout: np.ndarray, train: np.ndarray) -> dict:
-    """Held-out reconstruction figures of the VAE and of the mean-image baseline."""
+    """Held-out reconstruction figures of the VAE and of the mean-image baseline.
+
+    Args:
+        generator: G (its encoder and decoder are used, not its repair).
+        dataset: the worlds; ``cells`` uint8[N, D].
+        holdout: int[H] indices of the held-out worlds.
+        train: int[T] indices of the training worlds (for the mean image).
+    """
     if len(holdout) == 0:
         raise WorldagentError("no held-out worlds to measure reconstruction on; train with --holdout > 0.")
     cells = dataset.cells[holdout].astype(np.float32)
@@ -73,59 +77,82 @@ def reconstruction(generator: Generator, dataset: WorldDataset, holdout: np.ndar
     return {"vae": _cell_scores(logits, cells), "mean_image": _cell_scores(baseline, cells), "worlds": int(len(holdout))}
 
 
-def racing_figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.Array) -> dict:
-    """Self-mapping rate over the whole dataset and coverage of ``samples`` draws z ~ N(0, I)."""
-    own = _batched(_self_indices, dataset.cells.astype(np.float32), generator)
-    z = np.asarray(jax.random.normal(key, (samples, generator.latent_dim)))
-    reached = _batched(_sample_indices, z, generator)
-    counts = np.bincount(reached, minlength=len(dataset))
+def _each(worlds, count: int):
+    """The ``count`` unbatched worlds of a batch, as numpy (copied to the host once)."""
+    worlds = jax.tree_util.tree_map(np.asarray, worlds)
+    return (jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], worlds) for i in range(count))
+
+
+def _valid(world) -> bool:
+    try:
+        world.validate()
+    except WorldagentError:
+        return False
+    return True
+
+
+def _valid_each(worlds, count: int) -> np.ndarray:
+    """bool[B]: whether each world of a batch passes ``validate()`` (host-side, one by one)."""
+    return np.fromiter((_valid(world) for world in _each(worlds, count)), bool, count)
+
+
+def _concat(batches: list):
+    """One batched world from chunks of batched worlds."""
+    return jax.tree_util.tree_map(lambda *leaves: np.concatenate([np.asarray(leaf) for leaf in leaves]), *batches)
+
+
+def _self_mapping_rate(generator: Generator, dataset: WorldDataset, spec) -> float:
+    """Fraction of dataset worlds x with cells(G(encode(x))) == cells(x)."""
+    cells = dataset.cells.astype(np.float32)
+    rebuilt = [spec.cells(_reconstruct_worlds(generator, cells[i : i + BATCH])) for i in range(0, len(cells), BATCH)]
+    return float(np.mean(np.all(np.concatenate(rebuilt) == dataset.cells, axis=1)))
+
+
+def _diversity(cells: np.ndarray, dataset_size: int) -> dict:
+    """Coverage and diversity figures of the samples' cells uint8[S, D]."""
+    samples = len(cells)
+    _, counts = np.unique(cells, axis=0, return_counts=True)
+    pairs = np.random.default_rng(0).integers(0, samples, size=(min(HAMMING_PAIRS, samples * 4), 2))
     return {
-        "self_mapping_rate": float(np.mean(own == np.arange(len(dataset)))),
-        "coverage_distinct_tracks": int((counts > 0).sum()),
-        "coverage_fraction": float((counts > 0).mean()),
+        "coverage_distinct_worlds": int(len(counts)),
+        "coverage_fraction": float(len(counts) / dataset_size),
         "most_reached_share": float(counts.max() / samples),
-        "samples": int(samples),
+        "distinct_layouts": int(len(counts)),
+        "mean_cell_hamming": float((cells[pairs[:, 0]] != cells[pairs[:, 1]]).sum(1).mean()),
     }
 
 
-def harvest_figures(generator: Generator, samples: int, key: jax.Array) -> dict:
-    """Validity before / after repair and wall diversity of ``samples`` draws z ~ N(0, I)."""
+def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.Array) -> dict:
+    """Self-mapping over the dataset; coverage, validity and diversity of ``samples`` draws z ~ N(0, I).
+
+    Args:
+        generator: G, built on ``dataset``.
+        dataset: its training dataset (N worlds).
+        samples: S, the number of latents drawn from the prior.
+        key: PRNG key of the draws.
+
+    Returns:
+        ``self_mapping_rate``, ``coverage_distinct_worlds`` (distinct sampled worlds, by cells),
+        ``coverage_fraction`` (that over N), ``most_reached_share`` (the commonest sample's
+        share), ``validity_after_repair``, ``validity_before_repair`` (only when the spec has a
+        ``raw_decode``), ``distinct_layouts``, ``mean_cell_hamming`` (between random sample
+        pairs) and ``samples``.
+    """
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
+        raise WorldagentError(f"samples={samples!r}; draw at least 1 latent.")
+    spec = registry.get(generator.env)
     z = np.asarray(jax.random.normal(key, (samples, generator.latent_dim)))
-    repaired_walls, repaired_apples, raw_valid, raw_exact = [], [], [], []
-    for i in range(0, samples, BATCH):
-        maps, logits = _sample_maps(generator, jnp.asarray(z[i : i + BATCH]))
-        raw = threshold_harvest(np.asarray(logits).reshape(-1, *generator.cell_shape))
-        raw_valid.append(_valid_each(raw))
-        raw_exact.append(np.asarray(raw.apples).reshape(len(z[i : i + BATCH]), -1).sum(1) == generator.apples)
-        repaired_walls.append(np.asarray(maps.walls))
-        repaired_apples.append(np.asarray(maps.apples))
-    walls = np.concatenate(repaired_walls)
-    apples = np.concatenate(repaired_apples)
-    from worldagent.envs.harvest.world import HarvestMap
-
-    repaired_valid = _valid_each(HarvestMap(walls=walls, apples=apples)) & (apples.reshape(samples, -1).sum(1) == generator.apples)
-    flat = walls.reshape(samples, -1)
-    pairs = np.random.default_rng(0).integers(0, samples, size=(min(10_000, samples * 4), 2))
-    return {
-        "validity_before_repair": float(np.concatenate(raw_valid).mean()),
-        "exact_apples_before_repair": float(np.concatenate(raw_exact).mean()),
-        "validity_after_repair": float(repaired_valid.mean()),
-        "distinct_wall_layouts": int(len(np.unique(flat, axis=0))),
-        "mean_wall_hamming": float((flat[pairs[:, 0]] != flat[pairs[:, 1]]).sum(1).mean()),
-        "apples_per_map": int(generator.apples),
-        "samples": int(samples),
-    }
-
-
-def _valid_each(maps) -> np.ndarray:
-    """bool[B]: whether each map of a batch passes ``HarvestMap.validate``."""
-    from worldagent.envs.harvest.world import index_maps
-
-    ok = []
-    for i in range(len(np.asarray(maps.walls))):
-        try:
-            index_maps(maps, i).validate()
-            ok.append(True)
-        except WorldagentError:
-            ok.append(False)
-    return np.asarray(ok)
+    worlds, valid_after, valid_before = [], [], []
+    for start in range(0, samples, BATCH):
+        chunk, logits = _sample(generator, z[start : start + BATCH])
+        chunk, count = jax.tree_util.tree_map(np.asarray, chunk), len(z[start : start + BATCH])
+        worlds.append(chunk)
+        valid_after.append(_valid_each(chunk, count))
+        if spec.raw_decode is not None:
+            valid_before.append(_valid_each(spec.raw_decode(np.asarray(logits)), count))
+    cells = np.asarray(spec.cells(_concat(worlds)), np.uint8)
+    result = {"self_mapping_rate": _self_mapping_rate(generator, dataset, spec), **_diversity(cells, len(dataset))}
+    result["validity_after_repair"] = float(np.concatenate(valid_after).mean())
+    if valid_before:
+        result["validity_before_repair"] = float(np.concatenate(valid_before).mean())
+    return {**result, "samples": int(samples)}

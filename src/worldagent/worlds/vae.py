@@ -168,7 +168,7 @@ class TrainedVAE:
     def load(cls, directory: Path | str) -> TrainedVAE:
         """Read a checkpoint written by ``save``; refuses other versions and architectures."""
         directory = Path(directory)
-        remedy = f"train one with `worldagent generator train racing|harvest --out {directory}`"
+        remedy = f"train one with `worldagent generator train ENV --out {directory}`"
         try:
             meta = json.loads((directory / "vae.json").read_text())
             blob = (directory / "vae.msgpack").read_bytes()

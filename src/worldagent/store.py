@@ -167,6 +167,25 @@ class RunStore:
     def campaigns(self) -> list[Campaign]:
         return [self.campaign(row[0]) for row in self.db.execute("SELECT name FROM campaigns ORDER BY id")]
 
+    def delete_campaigns(self, names: list[str] | tuple[str, ...]) -> int:
+        """Delete campaigns ``names`` and their evaluations (a restarted phase starts clean); returns how many existed.
+
+        Unknown names are ignored, so deleting is idempotent."""
+        names = list(names)
+        if not names:
+            return 0
+        marks = ",".join("?" * len(names))
+        self.db.execute("BEGIN IMMEDIATE")  # both tables or neither (autocommit mode otherwise)
+        try:
+            found = self.db.execute(f"SELECT COUNT(*) FROM campaigns WHERE name IN ({marks})", names).fetchone()[0]
+            self.db.execute(f"DELETE FROM evaluations WHERE campaign_id IN (SELECT id FROM campaigns WHERE name IN ({marks}))", names)
+            self.db.execute(f"DELETE FROM campaigns WHERE name IN ({marks})", names)
+            self.db.execute("COMMIT")
+        except BaseException:
+            self.db.execute("ROLLBACK")
+            raise
+        return int(found)
+
     def open_campaign(
         self, name: str, env: str, objective: str, maximize: bool, optimiser: str, budget: int, seed: int, config: dict, resume: bool
     ) -> Campaign:

@@ -6,7 +6,7 @@ jitted ``vmap(vmap(while_loop))`` over worlds × repeats × steps. An episode's 
 it ends; under ``vmap`` the batch runs until its last episode ends, the finished ones frozen.
 Nothing per step is stored: the metrics accumulate in the env state.
 
-``evaluate_host`` does the same for an external (non-JAX) policy (``agents.policy.CallablePolicy``),
+``evaluate_host`` does the same for an external (non-JAX) policy (``agents.external.CallablePolicy``),
 one episode at a time from Python, with the same output.
 """
 
@@ -76,7 +76,7 @@ def evaluate(
 
     Args:
         env: the environment.
-        policy: an ``agents.policy.Policy`` (a pytree with ``act(params, obs, key, state)``).
+        policy: a ``Policy`` (a pytree with ``act(params, obs, key, state)``).
         worlds: B worlds with a leading batch axis.
         repeats: episodes per world (the paper: 8).
         key: randomness of all the episodes (ignored if ``keys`` is given).
@@ -108,7 +108,7 @@ def evaluate_host(
     env: Environment, policy, worlds: Any, repeats: int, key: jax.Array, params: Any = None, num_steps: int | None = None
 ) -> dict[str, np.ndarray]:
     """``evaluate`` for an external policy called from Python (slow; same output)."""
-    from worldagent.agents.policy import host_episode
+    from worldagent.agents.external import host_episode
 
     params = env.default_params if params is None else params
     count = _batch_size(worlds)

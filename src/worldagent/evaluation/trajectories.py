@@ -6,8 +6,10 @@ agents' positions at every step. The replay mirrors ``local.run_episode`` key fo
 reset/step split of each episode key), so with the keys the campaign used (``scored_keys``) the
 drawn episodes are exactly the scored ones: same return, same crash, same step count.
 
-``replay(env, policy, world, keys[E]) -> Episodes``: one jitted ``vmap(scan)`` over the E
-episodes; a finished episode is frozen, so positions after its end repeat its last one.
+``replay(spec, env, policy, world, keys[E]) -> Episodes``: one jitted ``vmap(scan)`` over the E
+episodes; a finished episode is frozen, so positions after its end repeat its last one. Where
+the agents are is the env's own business (``EnvSpec.trace``); how episodes ended, in words, too
+(``EnvSpec.episode_note``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from worldagent.envs import registry
 from worldagent.envs.core import Environment
 from worldagent.errors import WorldagentError
 
@@ -29,10 +32,10 @@ class Episodes:
     """E replayed episodes of one world.
 
     Attributes:
-        positions: where the agents were at the start and after every step: racing
-            f32[E, T+1, 2] normalised (x, y); harvest i32[E, T+1, N, 2] (row, col) cells.
-        present: bool[E, T+1] (racing) or bool[E, T+1, N] (harvest): the agent is on the map
-            (harvest agents are removed while tagged out; racing agents always are).
+        positions: where the agents were at the start and after every step, as ``spec.trace``
+            says: [E, T+1, ...] (racing f32[E, T+1, 2] (x, y); harvest i32[E, T+1, N, 2] cells).
+        present: bool[E, T+1, ...]: the agent is on the map (harvest agents are removed while
+            tagged out; racing's particle always is).
         steps: i32[E] steps each episode took (its positions are ``positions[e, :steps[e] + 1]``).
         metrics: ``env.metrics`` of each episode's end, {name: [E] or [E, N]} — the evaluator's.
     """
@@ -49,12 +52,6 @@ class Episodes:
         """Positions of episode ``episode``'s steps taken: [steps + 1, 2] (or [steps + 1, N, 2])."""
         return self.positions[episode, : int(self.steps[episode]) + 1]
 
-    def endings(self) -> list[str]:
-        """How each racing episode ended: "crash", "lap" or "timeout" (harvest: always "timeout")."""
-        crashed = np.asarray(self.metrics.get("crashed", np.zeros(len(self))), bool)
-        lapped = np.asarray(self.metrics.get("lap_completed", np.zeros(len(self))), bool)
-        return ["crash" if c else "lap" if lap else "timeout" for c, lap in zip(crashed, lapped)]
-
 
 def scored_keys(seed: int, repeats: int) -> jax.Array:
     """The ``[repeats]`` episode keys ``LatentObjective`` gives a world evaluated with ``seed``.
@@ -65,15 +62,8 @@ def scored_keys(seed: int, repeats: int) -> jax.Array:
     return jax.random.split(jax.random.key(int(seed)), int(repeats))
 
 
-def _where(state: Any) -> tuple[jax.Array, jax.Array]:
-    """(positions, present) of a state: harvest agents are off the map while tagged out."""
-    timer = getattr(state, "tagged_timer", None)
-    present = jnp.bool_(True) if timer is None else timer == 0
-    return state.position, present
-
-
-def replay_episode(env: Environment, policy, key: jax.Array, world: Any, params: Any, num_steps: int):
-    """One episode as ``local.run_episode`` plays it, recording the agents' positions.
+def replay_episode(env: Environment, trace, policy, key: jax.Array, world: Any, params: Any, num_steps: int):
+    """One episode as ``local.run_episode`` plays it, recording ``trace(state)`` (where the agents are).
 
     Returns:
         (positions [T+1, ...], present [T+1, ...], steps i32, metrics of the last state).
@@ -91,31 +81,32 @@ def replay_episode(env: Environment, policy, key: jax.Array, world: Any, params:
         obs = jax.tree_util.tree_map(keep, next_obs, obs)
         state = jax.tree_util.tree_map(keep, next_state, state)
         carry = (obs, state, jnp.logical_or(done, ended), steps + (~done).astype(jnp.int32), keep(next_key, key))
-        return carry, _where(state)
+        return carry, trace(state)
 
     carry = (obs, state, jnp.bool_(False), jnp.int32(0), key_steps)
     (_, final, _, steps, _), (positions, present) = jax.lax.scan(one_step, carry, None, length=num_steps)
-    start, start_present = _where(state)
+    start, start_present = trace(state)
     positions = jnp.concatenate([start[None], positions])
     present = jnp.concatenate([jnp.broadcast_to(start_present, present.shape[1:])[None], present])
     return positions, present, steps, env.metrics(final)
 
 
 @functools.lru_cache(maxsize=16)
-def _compiled(env: Environment, num_steps: int):
+def _compiled(env: Environment, trace, num_steps: int):
     """Jitted ``(policy, world, keys[E], params) -> replay_episode`` over E episodes, for one env."""
     episodes = lambda policy, world, keys, params: jax.vmap(  # noqa: E731
-        lambda key: replay_episode(env, policy, key, world, params, num_steps)
+        lambda key: replay_episode(env, trace, policy, key, world, params, num_steps)
     )(keys)
     return jax.jit(episodes)
 
 
-def replay(env: Environment, policy, world: Any, keys: jax.Array, params: Any = None, num_steps: int | None = None) -> Episodes:
+def replay(spec, env: Environment, policy, world: Any, keys: jax.Array, params: Any = None, num_steps: int | None = None) -> Episodes:
     """Replay E episodes of ``policy`` on one (unbatched) ``world``, keeping positions.
 
     Args:
+        spec: the env's ``EnvSpec`` (or its name): ``spec.trace`` says where the agents are.
         env: the environment.
-        policy: an ``agents.policy.Policy``.
+        policy: a ``Policy``.
         world: one world (no batch axis).
         keys: ``[E]`` episode keys (``scored_keys`` for the episodes a campaign scored).
         params: env parameters (default: ``env.default_params``).
@@ -134,25 +125,11 @@ def replay(env: Environment, policy, world: Any, keys: jax.Array, params: Any = 
     keys = jnp.asarray(keys)
     if keys.ndim != 1 or len(keys) < 1:
         raise WorldagentError(f"episode keys have shape {keys.shape}; pass a 1-d array of at least one key.")
-    positions, present, steps, metrics = _compiled(env, num_steps)(policy, world, keys, params)
+    trace = registry.get(spec).trace
+    positions, present, steps, metrics = _compiled(env, trace, num_steps)(policy, world, keys, params)
     return Episodes(
         np.asarray(positions),
         np.asarray(present, bool),
         np.asarray(steps),
         {name: np.asarray(value) for name, value in metrics.items()},
     )
-
-
-def world_from_arrays(env_name: str, arrays: dict[str, np.ndarray]) -> Any:
-    """The world a run store kept (``Evaluation.world``, a dict of arrays) as the env's pytree."""
-    if arrays is None:
-        raise WorldagentError("this evaluation was stored without its world; rerun the campaign with worlds kept.")
-    if env_name == "racing":
-        from worldagent.envs.racing.world import Track
-
-        return Track(**{name: np.asarray(value) for name, value in arrays.items()})
-    if env_name == "harvest":
-        from worldagent.envs.harvest.world import HarvestMap
-
-        return HarvestMap(walls=np.asarray(arrays["walls"], bool), apples=np.asarray(arrays["apples"], bool))
-    raise WorldagentError(f"unknown environment {env_name!r}; use racing or harvest.")

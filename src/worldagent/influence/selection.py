@@ -9,10 +9,11 @@ property written as text and parsed by a small grammar, never by ``eval``::
     clause    := METRIC OP NUMBER
     OP        := "<" | "<=" | ">" | ">=" | "==" | "!="
 
-``METRIC`` is one of the env's per-episode metrics (``search.objectives.METRICS``), compared
+``METRIC`` is one of the env's per-episode metrics (``EnvSpec.metrics.names``), compared
 after averaging it over a world's episodes (so ``crashed`` is the world's crash rate), or an
-alias: ``crash_rate`` (racing ``crashed``), ``lap_rate`` (racing ``lap_completed``) and
-``reward`` (each env's main reward metric: racing ``return``, harvest ``group_reward``).
+alias the env registers (racing: ``crash_rate`` for ``crashed``, ``lap_rate`` for
+``lap_completed``), or ``reward``, every env's main metric (racing ``return``, harvest
+``group_reward``).
 ``==`` and ``!=`` compare with a tolerance of 1e-9 so that means of exact values (a rate of
 k/8) are not lost to float rounding.
 """
@@ -25,18 +26,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.search.objectives import METRICS
 
 OPERATORS = ("<", "<=", ">", ">=", "==", "!=")
 EQUALITY_TOLERANCE = 1e-9
-
-# alias -> {env: metric}; an alias only exists for the envs listed.
-ALIASES = {
-    "crash_rate": {"racing": "crashed"},
-    "lap_rate": {"racing": "lap_completed"},
-    "reward": {"racing": "return", "harvest": "group_reward"},
-}
 
 EXAMPLE = "e.g. 'crash_rate > 0.5' or 'conflict == 0 and equality >= 0.5'"
 
@@ -134,36 +128,41 @@ def world_means(evaluations: Sequence, metric: str) -> np.ndarray:
     return means
 
 
+def aliases(env: str) -> dict[str, str]:
+    """alias -> metric of ``env``: its registered aliases, and ``reward`` for its main metric."""
+    metrics = registry.get(env).metrics
+    return {**metrics.aliases, "reward": metrics.main}
+
+
 def infer_env(evaluations: Sequence) -> str:
-    """The env whose metrics the evaluations' episodes hold (the first env all of whose metrics are there)."""
+    """The env whose metrics the evaluations' episodes hold (the registered env most of whose metrics are there)."""
     keys = set().union(*(episode.keys() for evaluation in evaluations for episode in evaluation.episodes))
-    for env, names in METRICS.items():
-        if set(names) - {"normalised_return"} <= keys:
-            return env
-    raise WorldagentError("cannot tell the environment from these evaluations' metrics; resolve the selection with .resolve(env).")
+    overlap = {name: len(keys & set(registry.get(name).metrics.names)) for name in registry.names() if registry.get(name).metrics.main in keys}
+    if not overlap:
+        raise WorldagentError("cannot tell the environment from these evaluations' metrics; resolve the selection with .resolve(env).")
+    return max(overlap, key=overlap.get)
 
 
 def valid_names(env: str | None = None) -> list[str]:
-    """The metric names and aliases a selection may use (for ``env``, or for any env)."""
-    envs = [env] if env else list(METRICS)
-    metrics = [m for e in envs for m in METRICS[e]]
-    aliases = [alias for alias, table in ALIASES.items() if any(e in table for e in envs)]
-    return list(dict.fromkeys(metrics + aliases))
+    """The metric names and aliases a selection may use (for ``env``, or for any registered env)."""
+    envs = [registry.get(env).name] if env else list(registry.names())
+    return list(dict.fromkeys(name for e in envs for name in (*registry.get(e).metrics.names, *aliases(e))))
+
+
+def _alias_target(name: str, env: str | None) -> str | None:
+    """What alias ``name`` means for ``env``; without an env, its meaning if every env agrees, else None."""
+    if env is not None:
+        return aliases(env).get(name, name)
+    meanings = {aliases(e)[name] for e in registry.names() if name in aliases(e)}
+    return meanings.pop() if len(meanings) == 1 else (None if meanings else name)
 
 
 def _clause(name: str, op: str, number: float, env: str | None) -> Clause:
     """A checked clause; the name resolved when ``env`` (or the alias) makes it unambiguous."""
-    if env is not None and env not in METRICS:
-        raise WorldagentError(f"unknown environment {env!r}; use one of: {', '.join(METRICS)}.")
     if name not in valid_names(env):
-        where = f"{env} " if env else ""
+        where = f"{registry.get(env).name} " if env else ""
         raise WorldagentError(f"unknown {where}metric {name!r} in the selection; use one of: {', '.join(valid_names(env))}.")
-    if name in ALIASES:
-        table = ALIASES[name]
-        metric = table.get(env) if env else (next(iter(table.values())) if len(set(table.values())) == 1 else None)
-    else:
-        metric = name
-    return Clause(name, op, number, metric)
+    return Clause(name, op, number, _alias_target(name, env))
 
 
 def _tokens(text: str) -> list[tuple[str, str, int]]:
@@ -190,8 +189,8 @@ def parse_selection(text: str, env: str | None = None) -> Selection:
 
     Args:
         text: the selection.
-        env: "racing" or "harvest" to check and resolve metric names for that env; None accepts
-            any env's metrics and resolves env-dependent aliases (``reward``) when the
+        env: a registered env's name to check and resolve metric names for it; None accepts
+            any registered env's metrics and resolves env-dependent aliases (``reward``) when the
             selection is applied.
 
     Returns:

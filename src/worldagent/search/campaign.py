@@ -52,7 +52,7 @@ class CampaignSpec:
 
     Attributes:
         name: the campaign's name in the store.
-        env: "racing" or "harvest".
+        env: the registered environment's name (``registry.get(env)``).
         objective: the metric's name (e.g. "return", "crashed", "group_reward").
         maximize: the direction.
         optimiser: "cmaes", "bo" or "random".
@@ -79,6 +79,15 @@ class CampaignSpec:
             raise WorldagentError(f"budget={self.budget}; evaluate at least one world.")
         if self.chunk < 0:
             raise WorldagentError(f"chunk={self.chunk}; pass 0 (whole generations) or a positive size.")
+
+
+def best_evaluation(evaluations: Sequence[Evaluation], maximize: bool) -> Evaluation | None:
+    """The evaluation with the lowest (or highest) finite score, the earliest on ties; None if none is finite."""
+    finite = [e for e in evaluations if np.isfinite(e.score)]
+    if not finite:
+        return None
+    scores = np.array([e.score for e in finite])
+    return finite[int(np.argmax(scores) if maximize else np.argmin(scores))]
 
 
 def evaluation_seed(seed: int, generation: int, slot: int) -> int:

@@ -2,13 +2,11 @@
 
 An objective is a per-episode metric of the environment and a direction. A latent z is scored
 by generating its world G(z), rolling the agents out ``repeats`` times on it (the paper: 8),
-and averaging the metric over those episodes::
+and averaging the metric over those episodes. The metrics, their aliases ("reward" is the
+env's main metric, racing ``crash_rate`` is ``crashed``) and the derived ones (racing's
+normalised return) come from the env's registration (``EnvSpec.metrics``).
 
-    racing:  return, normalised_return, crashed (its mean is the crash rate), lap_completed,
-             progress, steps
-    harvest: group_reward, conflict, equality, sustainability, peace
-
-Each episode's metrics are kept with the evaluation, raw values beside normalised ones.
+Each episode's metrics are kept with the evaluation, raw values beside derived ones.
 """
 
 from __future__ import annotations
@@ -20,46 +18,30 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.local import evaluate
 from worldagent.search.campaign import Outcome
 
-METRICS = {
-    "racing": ("return", "normalised_return", "crashed", "lap_completed", "progress", "steps"),
-    "harvest": ("group_reward", "conflict", "equality", "sustainability", "peace"),
-}
-
-
-ALIASES = {"reward": {"racing": "return", "harvest": "group_reward"}}  # the paper's main metric
-
-
-def metric_name(env: str, name: str) -> str:
-    """``name``, with "reward" meaning each env's main reward metric (paper §4.4)."""
-    return ALIASES.get(name, {}).get(env, name)
-
 
 @dataclass(frozen=True)
 class Objective:
-    """A metric of ``env``'s episodes and the direction to push it."""
+    """A metric of ``env``'s episodes and the direction to push it.
+
+    Attributes:
+        env: the registered environment's name.
+        metric: a metric or alias of it; stored as the canonical name (``reward`` -> the main one).
+        maximize: the direction.
+    """
 
     env: str
     metric: str
     maximize: bool
 
     def __post_init__(self):
-        if self.env not in METRICS:
-            raise WorldagentError(f"unknown environment {self.env!r}; use one of: {', '.join(METRICS)}.")
-        if self.metric not in METRICS[self.env]:
-            raise WorldagentError(f"{self.env} has no metric {self.metric!r}; use one of: {', '.join(METRICS[self.env])}.")
-
-
-def with_derived_metrics(env_name: str, metrics: dict[str, np.ndarray], params: Any) -> dict[str, np.ndarray]:
-    """Add the metrics computed from others (racing: the normalised return, paper §6)."""
-    if env_name == "racing":
-        from worldagent.agents.metrics import normalised_return
-
-        metrics = {**metrics, "normalised_return": np.asarray(normalised_return(metrics["return"], params))}
-    return metrics
+        spec = registry.get(self.env)
+        object.__setattr__(self, "env", spec.name)
+        object.__setattr__(self, "metric", spec.metrics.resolve(self.metric, spec.name))
 
 
 def episode_records(metrics: dict[str, np.ndarray], world: int) -> list[dict]:
@@ -89,6 +71,7 @@ class LatentObjective:
         if generator.env != objective.env:
             raise WorldagentError(f"the generator makes {generator.env} worlds but the objective is a {objective.env} metric.")
         self.objective, self.env, self.policy, self.generator = objective, env, policy, generator
+        self.spec = registry.get(objective.env)
         self.repeats, self.keep_worlds = int(repeats), keep_worlds
         self.params = env.default_params if params is None else params
 
@@ -97,7 +80,7 @@ class LatentObjective:
         worlds = _generate(self.generator, jnp.asarray(z, jnp.float32))
         keys = jnp.stack([jax.random.split(jax.random.key(int(seed)), self.repeats) for seed in seeds])
         metrics = evaluate(self.env, self.policy, worlds, self.repeats, None, self.params, keys=keys)
-        metrics = with_derived_metrics(self.objective.env, metrics, self.params)
+        metrics = self.spec.metrics.with_derived(metrics, self.params)
         scores = np.asarray(metrics[self.objective.metric], np.float64).mean(axis=1)
         outcomes = []
         for b in range(len(z)):

@@ -1,0 +1,422 @@
+"""The paper's experiments as library calls: every CLI command and every reproduce phase calls these.
+
+- ``setup(env, agent, generator)``: what every experiment needs, resolved and checked once.
+- ``search``: one campaign (``worldagent search``).
+- ``random_evaluation``: the metric over worlds z ~ N(0, I) (§6.1.1, Figure 6a).
+- ``strategic_evaluation``: one campaign minimising and one maximising the metric; the worst
+  and best worlds found (§6.1.2, Figures 1 and 6b).
+- ``compare_optimisers``: the optimisers' sample efficiency (§6.1.3, Figure 7).
+- ``influence``: retrain on worlds with a property and compare (§6.2, Figure 8).
+
+Every campaign is written to the run store as it goes and is resumed by name (the names come
+from the helpers below, the one place they are made), so rerunning an experiment evaluates
+nothing new and a killed one loses nothing it finished.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from worldagent.envs import registry
+from worldagent.envs.registry import EnvSpec
+from worldagent.errors import WorldagentError
+from worldagent.search.campaign import CampaignSpec, best_evaluation, evaluation_seed, run_campaign
+from worldagent.search.objectives import LatentObjective, Objective
+from worldagent.search.optimisers import OPTIMISERS, OptimiserConfig
+from worldagent.store import Evaluation, RunStore
+
+RANDOM_BATCH = 250  # latents per round of a random evaluation
+
+
+# -- campaign names (shared by the commands, the reproduce phases and the report) ----------------
+
+
+def campaign_name(optimiser: str, maximize: bool, metric: str, seed: int) -> str:
+    """``cmaes-min-return-s0``: a search's default name, and each half of a strategic evaluation."""
+    return f"{optimiser}-{'max' if maximize else 'min'}-{metric}-s{seed}"
+
+
+def random_campaign_name(metric: str, seed: int) -> str:
+    """``random-return-s0``: the random evaluation's campaign."""
+    return f"random-{metric}-s{seed}"
+
+
+def strategic_campaign_names(optimiser: str, metric: str, seed: int) -> tuple[str, str]:
+    """(minimising, maximising) campaign names of a strategic evaluation."""
+    return campaign_name(optimiser, False, metric, seed), campaign_name(optimiser, True, metric, seed)
+
+
+def comparison_campaign_name(optimiser: str, maximize: bool, metric: str, seed: int) -> str:
+    """``compare-bo-min-return-s1``: one optimiser and seed of an optimiser comparison."""
+    return "compare-" + campaign_name(optimiser, maximize, metric, seed)
+
+
+def campaign_names(metric: str, seed: int) -> dict[str, str]:
+    """{"random", "min", "max"}: the random and (CMA-ES) strategic campaigns of ``metric`` and ``seed``."""
+    low, high = strategic_campaign_names("cmaes", metric, seed)
+    return {"random": random_campaign_name(metric, seed), "min": low, "max": high}
+
+
+def comparison_campaign_names(
+    metric: str, seeds: Sequence[int], optimisers: Sequence[str] = OPTIMISERS, maximize: bool = False
+) -> dict[str, list[str]]:
+    """{optimiser: [campaign name per seed]} of an optimiser comparison."""
+    return {opt: [comparison_campaign_name(opt, maximize, metric, s) for s in seeds] for opt in optimisers}
+
+
+# -- the setup -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What every experiment needs: the env, the agents and the generator, checked against each other.
+
+    Attributes:
+        spec: the env's ``EnvSpec``.
+        env, params: ``spec.make_env(options)``.
+        policy: the agents (a ``Policy``; external ones have ``host = True``).
+        generator: G(z) of ``spec``'s worlds.
+        repeats: episodes per world (the paper: 8).
+        options: the env options (checked, defaults filled in).
+    """
+
+    spec: EnvSpec
+    env: Any
+    params: Any
+    policy: Any
+    generator: Any
+    repeats: int = 8
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    def metric(self, name: str) -> str:
+        """The canonical metric for ``name`` ("reward": the env's main one); unknown names are refused."""
+        return self.spec.metrics.resolve(name, self.spec.name)
+
+
+def setup(
+    env: str | EnvSpec, agent: Any, generator: Path | str | Any, *, options: Mapping[str, Any] | None = None, greedy: bool = False, repeats: int = 8
+) -> Setup:
+    """Resolve an experiment's inputs, failing fast with one line on any mismatch.
+
+    Args:
+        env: a registered env's name (or its spec).
+        agent: a ``Policy``, or text: a ``worldagent train`` run dir, the policy dir inside it, or
+            a scripted policy's name (``spec.scripted``).
+        generator: a ``Generator`` or its directory (``worldagent generator train``).
+        options: env options (harvest: ``{"tagger": (0,)}``).
+        greedy: trained actor-critics act by argmax instead of sampling.
+        repeats: episodes per world (the paper: 8).
+    """
+    spec = registry.get(env)
+    options = spec.check_options(options)
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
+        raise WorldagentError(f"repeats={repeats!r}; play at least one episode per world.")
+    env_obj, params = spec.make_env(options)
+    if isinstance(generator, (str, Path)):
+        from worldagent.worlds.generator import load_generator
+
+        where, generator = generator, load_generator(generator)[0]
+        if generator.env != spec.name:
+            raise WorldagentError(f"the generator in {where} makes {generator.env} worlds; pass a {spec.name} generator.")
+    elif generator.env != spec.name:
+        raise WorldagentError(f"the generator makes {generator.env} worlds; pass a {spec.name} generator.")
+    if isinstance(agent, str):
+        from worldagent.agents.loaders import load_agent
+
+        agent = load_agent(spec, agent, greedy, options)
+    return Setup(spec, env_obj, params, agent, generator, int(repeats), options)
+
+
+# -- campaigns -----------------------------------------------------------------------------------
+
+
+def _stored_config(store: RunStore, name: str) -> OptimiserConfig | None:
+    """The optimiser settings campaign ``name`` was started with (None if it does not exist)."""
+    existing = store.campaign(name)
+    if existing is None:
+        return None
+    fields = OptimiserConfig.__dataclass_fields__
+    return OptimiserConfig(**{key: value for key, value in existing.config.items() if key in fields})
+
+
+def search(
+    store: RunStore,
+    setup: Setup,
+    metric: str,
+    *,
+    maximize: bool,
+    optimiser: str,
+    budget: int,
+    seed: int,
+    name: str | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    config: OptimiserConfig | None = None,
+) -> tuple[list[Evaluation], CampaignSpec]:
+    """Run (or resume) one campaign of ``metric`` over G's latent space (paper §4.4).
+
+    Args:
+        store: the run store.
+        setup: env, agents, generator (``setup(...)``).
+        metric: a metric of the env, an alias, or "reward".
+        maximize: the direction.
+        optimiser: "cmaes", "bo" or "random".
+        budget: evaluated worlds (CMA-ES rounds up to whole generations).
+        seed: seed of the optimiser and of every episode.
+        name: the campaign's name (default ``campaign_name(optimiser, maximize, metric, seed)``).
+        resume: continue a campaign of that name (else an existing one is refused).
+        config: optimiser settings; None: those the campaign was started with, else the defaults.
+
+    Returns:
+        (its evaluations in order, its ``CampaignSpec``).
+    """
+    if optimiser not in OPTIMISERS:
+        raise WorldagentError(f"unknown optimiser {optimiser!r}; use one of: {', '.join(OPTIMISERS)}.")
+    metric = setup.metric(metric)
+    name = name or campaign_name(optimiser, maximize, metric, seed)
+    objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
+    config = config or _stored_config(store, name) or OptimiserConfig()
+    spec = CampaignSpec(name, setup.spec.name, metric, maximize, optimiser, int(budget), int(seed), setup.generator.latent_dim, config)
+    return run_campaign(store, spec, objective, resume=resume, progress=progress), spec
+
+
+def random_evaluation(
+    store: RunStore, setup: Setup, metric: str = "reward", *, worlds: int = 1000, seed: int = 0, progress: bool = True, resume: bool = True
+) -> list[Evaluation]:
+    """The metric on ``worlds`` random worlds G(z), z ~ N(0, I) (paper §6.1.1, Figure 6a).
+
+    The campaign is ``random_campaign_name(metric, seed)``. If it already holds at least
+    ``worlds`` evaluations, the first ``worlds`` are returned and nothing is run; otherwise it
+    is resumed (``resume``) with the settings it was started with.
+
+    Returns:
+        ``worlds`` evaluations in order.
+    """
+    if worlds < 1:
+        raise WorldagentError(f"random worlds = {worlds}; evaluate at least one random world.")
+    metric = setup.metric(metric)
+    name = random_campaign_name(metric, seed)
+    stored = store.evaluations(name)
+    if len(stored) >= worlds:
+        return stored[:worlds]
+    config = _stored_config(store, name) or OptimiserConfig(random_batch=min(worlds, RANDOM_BATCH))
+    found, _ = search(
+        store, setup, metric, maximize=True, optimiser="random", budget=worlds, seed=seed, name=name, resume=resume, progress=progress, config=config
+    )
+    return found[:worlds]
+
+
+def random_scores(store: RunStore, metric: str, seed: int) -> np.ndarray:
+    """f64[worlds]: the stored random evaluation's per-world scores (the baseline of Figures 6b and 7)."""
+    return np.array([e.score for e in store.evaluations(random_campaign_name(metric, seed))], np.float64)
+
+
+def best(evaluations: Sequence[Evaluation], maximize: bool) -> Evaluation:
+    """The evaluation with the lowest (or highest) finite score (earliest on ties); refuses none finite."""
+    found = best_evaluation(evaluations, maximize)
+    if found is None:
+        raise WorldagentError("no world of the campaign has a finite score; check the policy and the metric.")
+    return found
+
+
+def strategic_evaluation(
+    store: RunStore,
+    setup: Setup,
+    metric: str = "reward",
+    *,
+    budget: int,
+    seed: int = 0,
+    optimiser: str = "cmaes",
+    progress: bool = True,
+    resume: bool = True,
+    config: OptimiserConfig | None = None,
+) -> dict:
+    """Find the worlds that minimise and maximise ``metric`` (paper §6.1.2, Figure 6b).
+
+    Args:
+        store: the run store; ``setup``: env, agents, generator.
+        metric: a metric of the env, an alias, or "reward".
+        budget: evaluated worlds per direction (CMA-ES rounds up to whole generations).
+        seed: seed of both campaigns.
+        optimiser: "cmaes" (the paper's), "bo" or "random".
+        config: optimiser settings (default ``OptimiserConfig()``: CMA-ES population 21).
+
+    Returns:
+        {"min": Evaluation, "max": Evaluation (both with their worlds), "campaigns": [name_min,
+        name_max], "keys": (keys_min, keys_max), "metric": canonical name, "notes": (note_min,
+        note_max)}: the ``[repeats]`` episode keys each world was scored with (to replay the
+        scored episodes) and ``spec.episode_note`` of each ("", or e.g. ", 6/8 episodes crashed").
+    """
+    metric = setup.metric(metric)
+    names = strategic_campaign_names(optimiser, metric, seed)
+    found = {}
+    for direction, name, maximize in (("min", names[0], False), ("max", names[1], True)):
+        evaluations, _ = search(
+            store,
+            setup,
+            metric,
+            maximize=maximize,
+            optimiser=optimiser,
+            budget=budget,
+            seed=seed,
+            name=name,
+            resume=resume,
+            progress=progress,
+            config=config,
+        )
+        found[direction] = with_world(store, best(evaluations, maximize))
+    keys = tuple(scored_keys_of(store, found[d]) for d in ("min", "max"))
+    notes = tuple(episode_note(setup.spec, found[d]) for d in ("min", "max"))
+    return {"min": found["min"], "max": found["max"], "campaigns": list(names), "keys": keys, "metric": metric, "notes": notes}
+
+
+def episode_note(spec: EnvSpec, evaluation: Evaluation) -> str:
+    """``spec.episode_note`` of an evaluation's episodes ("" when the env has none)."""
+    if spec.episode_note is None or not evaluation.episodes:
+        return ""
+    shared = set.intersection(*(set(e) for e in evaluation.episodes))
+    return spec.episode_note({n: np.asarray([e[n] for e in evaluation.episodes]) for n in shared})
+
+
+def compare_optimisers(
+    store: RunStore,
+    setup: Setup,
+    metric: str = "reward",
+    *,
+    maximize: bool = False,
+    optimisers: Sequence[str] = ("cmaes", "bo", "random"),
+    budget: int,
+    budgets: Mapping[str, int] | None = None,
+    seeds: Sequence[int] = (0, 1, 2),
+    progress: bool = True,
+    resume: bool = True,
+    config: OptimiserConfig | None = None,
+) -> dict[str, list[np.ndarray]]:
+    """Run each optimiser for each seed on the same objective (paper §6.1.3, Figure 7).
+
+    Every optimiser gets ``budget`` (or its entry in ``budgets``, e.g. ``{"bo": 42}``: BO is
+    slow); CMA-ES, which evaluates whole generations, may run a few more worlds, and only the
+    first ``budget`` count, so that all compare on equal terms. Random search draws from its own
+    stream (``optimisers.RANDOM_STREAM``), so its worlds are not CMA-ES's first generation.
+
+    Returns:
+        {optimiser: [f64[budget] scores in evaluation order, one per seed]} for
+        ``reports.comparison.sample_efficiency``.
+    """
+    if not optimisers:
+        raise WorldagentError("no optimisers to compare; name at least one of: " + ", ".join(OPTIMISERS) + ".")
+    if not seeds:
+        raise WorldagentError("no seeds; compare over at least one seed.")
+    unknown = [o for o in (*optimisers, *(budgets or {})) if o not in OPTIMISERS]
+    if unknown:
+        raise WorldagentError(f"unknown optimiser {unknown[0]!r}; use some of: {', '.join(OPTIMISERS)}.")
+    metric = setup.metric(metric)
+    runs: dict[str, list[np.ndarray]] = {}
+    for optimiser in optimisers:
+        limit = int((budgets or {}).get(optimiser) or budget)
+        runs[optimiser] = []
+        for seed in seeds:
+            name = comparison_campaign_name(optimiser, maximize, metric, seed)
+            evaluations, _ = search(
+                store,
+                setup,
+                metric,
+                maximize=maximize,
+                optimiser=optimiser,
+                budget=limit,
+                seed=seed,
+                name=name,
+                resume=resume,
+                progress=progress,
+                config=config,
+            )
+            runs[optimiser].append(np.array([e.score for e in evaluations[:limit]], np.float64))
+    return runs
+
+
+def scored_keys_of(store: RunStore, evaluation: Evaluation) -> Any:
+    """The ``[episodes]`` keys ``evaluation``'s episodes were played with (its campaign's seed)."""
+    from worldagent.evaluation.trajectories import scored_keys
+
+    campaign = store.campaign(evaluation.campaign)
+    if campaign is None:
+        raise WorldagentError(f"campaign {evaluation.campaign!r} is not in {store.path}; pass the store it was run in.")
+    return scored_keys(evaluation_seed(campaign.seed, evaluation.generation, evaluation.slot), len(evaluation.episodes))
+
+
+def with_world(store: RunStore, evaluation: Evaluation) -> Evaluation:
+    """``evaluation`` with its stored world loaded (``evaluations()`` skips worlds by default)."""
+    if evaluation.world is not None:
+        return evaluation
+    for candidate in store.iter_evaluations(evaluation.campaign, with_worlds=True):
+        if (candidate.generation, candidate.slot) == (evaluation.generation, evaluation.slot):
+            return candidate
+    return evaluation
+
+
+# -- influencing ---------------------------------------------------------------------------------
+
+
+def influence(
+    run_dir: str | Path,
+    setup: Setup,
+    selection: Any,
+    *,
+    algo: str | None = None,
+    episodes: int | None = None,
+    seeds: Sequence[int] = (0, 1, 2),
+    candidates: int = 500,
+    search_budget: int = 0,
+    eval_worlds: int = 200,
+    config: Any = None,
+    seed: int = 0,
+    greedy: bool = False,
+    progress: bool = True,
+) -> dict:
+    """Train agents on worlds with a property and compare them with default training (paper §6.2, Figure 8).
+
+    ``influence.experiment.influence`` with the setup's env, agents, generator, options and
+    repeats; see it for the arguments. ``algo`` None: ``spec.default_algorithm``.
+
+    Returns:
+        The content of ``run_dir/influence.json``.
+    """
+    from worldagent.influence.experiment import influence as run
+
+    return run(
+        run_dir,
+        setup.spec,
+        setup.env,
+        setup.params,
+        setup.policy,
+        setup.generator,
+        selection,
+        options=dict(setup.options),
+        algo=algo,
+        episodes=episodes,
+        seeds=seeds,
+        candidates=candidates,
+        search_budget=search_budget,
+        eval_worlds=eval_worlds,
+        repeats=setup.repeats,
+        config=config,
+        seed=seed,
+        greedy=greedy,
+        progress=progress,
+    )
+
+
+def example_worlds(run_dir: str | Path, spec: EnvSpec | str, count: int = 4) -> Any:
+    """Up to ``count`` influenced worlds spread over the first selected metric (Figure 8, right), batched."""
+    from worldagent.influence.cache import load_influenced_worlds
+    from worldagent.influence.worlds import example_indices
+
+    worlds, _, values = load_influenced_worlds(run_dir, spec)
+    picks = example_indices(values, count)
+    return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[picks], worlds)

@@ -6,15 +6,14 @@ from pathlib import Path
 
 import typer
 
-from worldagent.commands.common import AGENT_HELP, ENV_HELP, console, friendly_errors
-from worldagent.errors import WorldagentError
+from worldagent.commands.console import console, friendly_errors
+from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, algo_help, algorithm, check_counts, env_argument, env_options, option_flag
 
-ALGORITHMS = {"racing": ("acktr", "ppo"), "harvest": ("dqn",)}
+RESULT_FILE = "influence.json"  # what ``experiments.influence`` writes in its run directory
 SELECT_HELP = (
     "The property of the new training worlds: METRIC OP NUMBER joined by 'and', OP one of < <= > >= == !=, "
-    "e.g. 'crash_rate > 0.5' (racing) or 'conflict == 0' (harvest). Metrics are averaged over a world's episodes: "
-    "racing: return, normalised_return, crashed, lap_completed, progress, steps; harvest: group_reward, conflict, "
-    "equality, sustainability, peace; aliases: crash_rate, lap_rate, reward."
+    "e.g. 'crash_rate > 0.5' (racing) or 'conflict == 0' (harvest). Metrics are averaged over a world's episodes; "
+    "`worldagent envs` lists each environment's metrics and aliases; reward is the main one."
 )
 
 
@@ -44,55 +43,40 @@ def result_table(result: dict):
 
 
 def influence_command(
-    env: str = typer.Argument(..., help=ENV_HELP),
-    agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
-    generator: Path = typer.Option(..., "--generator", help="Generator directory (from `worldagent generator train`)."),
-    select: str = typer.Option(..., "--select", help=SELECT_HELP),
-    algo: str = typer.Option(None, "--algo", help="racing: acktr (the paper's) or ppo; harvest: dqn."),
-    episodes: int = typer.Option(None, "--episodes", help="Training episodes per agent (default: the paper's budget, racing 10,000, harvest 5,000)."),
-    seeds: int = typer.Option(3, "--seeds", help="Training seeds 0..N-1: one default and one influenced agent each."),
-    candidates: int = typer.Option(500, "--candidates", help="Random G(z) worlds evaluated with --agent to find the property."),
-    search_budget: int = typer.Option(0, "--search-budget", help="Extra worlds a CMA-ES search evaluates, pushing toward the property (0: none)."),
-    eval_worlds: int = typer.Option(200, "--eval-worlds", help="Random G(z) worlds every trained agent is evaluated on (the same for all)."),
-    repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
-    tagger: int = typer.Option(None, "--tagger", help="Harvest: the agent allowed to TAG (the paper: 0)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the candidate, search and evaluation worlds."),
-    out: Path = typer.Option(Path("runs/influence"), "--out", help="Run directory; rerun to resume or reuse finished steps."),
-    greedy: bool = typer.Option(False, "--greedy", help="Actor-critics act by argmax instead of sampling."),
-    quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
+    env: str,
+    agent: str,
+    generator: Path,
+    select: str,
+    algo: str | None,
+    episodes: int | None,
+    seeds: int,
+    candidates: int,
+    search_budget: int,
+    eval_worlds: int,
+    repeats: int,
+    option: list[str],
+    seed: int,
+    out: Path,
+    greedy: bool,
+    quiet: bool,
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.influence.selection import parse_selection
 
-    if env not in ALGORITHMS:
-        raise WorldagentError(f"unknown environment {env!r}; use racing or harvest.")
     selection = parse_selection(select, env)  # before anything slow: a typo costs nothing
-    algo = algo or ALGORITHMS[env][0]
-    if algo not in ALGORITHMS[env]:
-        raise WorldagentError(f"unknown algorithm {algo!r} for {env}; use one of: {', '.join(ALGORITHMS[env])}.")
-    if seeds < 1:
-        raise WorldagentError(f"--seeds {seeds}; train at least one seed.")
-    if env == "racing" and tagger is not None:
-        raise WorldagentError("--tagger applies to harvest only.")
+    algo = algorithm(env, algo)
+    check_counts(seeds=seeds)
+    options = env_options(env, option)
 
-    import jax
-    import numpy as np
     from rich.console import Console
 
-    from worldagent.commands.common import agent_policy, env_and_params
-    from worldagent.influence.experiment import RESULT_FILE, example_indices, influence, load_influenced_worlds
-    from worldagent.reports.influence import influence_figure
-    from worldagent.worlds.generator import load_generator
+    from worldagent import experiments
+    from worldagent.reports.influence import influence_examples, influence_figure
 
-    _, params = env_and_params(env, [tagger] if tagger is not None else [])
-    policy = agent_policy(env, agent, greedy)
-    G, _, _ = load_generator(generator)
-    result = influence(
+    setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, repeats=repeats)
+    result = experiments.influence(
         out,
-        env,
-        policy,
-        G,
-        params,
+        setup,
         selection,
         algo=algo,
         episodes=episodes,
@@ -100,16 +84,11 @@ def influence_command(
         candidates=candidates,
         search_budget=search_budget,
         eval_worlds=eval_worlds,
-        repeats=repeats,
-        tagger=tagger,
-        progress=not quiet,
         seed=seed,
         greedy=greedy,
+        progress=not quiet,
     )
-    worlds, _, values = load_influenced_worlds(out, env)
-    picks = example_indices(values, 4)
-    examples = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[picks], worlds)
-    figure = influence_figure(result, examples, env, out / "influence.png")
+    figure = influence_figure(result, influence_examples(out, setup.spec), setup.spec, out / "influence.png")
     Console().print(result_table(result))
     counts = result["worlds"]
     console.print(
@@ -121,4 +100,30 @@ def influence_command(
 
 def register(app: typer.Typer) -> None:
     """Add ``worldagent influence``."""
-    app.command("influence")(friendly_errors(influence_command))
+
+    @app.command("influence")
+    @friendly_errors
+    def influence(
+        env: str = env_argument(),
+        agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
+        generator: Path = typer.Option(..., "--generator", help=GENERATOR_HELP),
+        select: str = typer.Option(..., "--select", help=SELECT_HELP),
+        algo: str = typer.Option(None, "--algo", help=algo_help()),
+        episodes: int = typer.Option(None, "--episodes", help="Training episodes per agent (default: the algorithm's budget for the env)."),
+        seeds: int = typer.Option(3, "--seeds", help="Training seeds 0..N-1: one default and one influenced agent each."),
+        candidates: int = typer.Option(500, "--candidates", help="Random G(z) worlds evaluated with --agent to find the property."),
+        search_budget: int = typer.Option(
+            0, "--search-budget", help="Extra worlds a CMA-ES search evaluates, pushing toward the property (0: none)."
+        ),
+        eval_worlds: int = typer.Option(200, "--eval-worlds", help="Random G(z) worlds every trained agent is evaluated on (the same for all)."),
+        repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+        option: list[str] = option_flag(),
+        seed: int = typer.Option(0, "--seed", help="Seed of the candidate, search and evaluation worlds."),
+        out: Path = typer.Option(Path("runs/influence"), "--out", help="Run directory; rerun to resume or reuse finished steps."),
+        greedy: bool = typer.Option(False, "--greedy", help="Actor-critics act by argmax instead of sampling."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
+    ) -> None:
+        """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
+        influence_command(
+            env, agent, generator, select, algo, episodes, seeds, candidates, search_budget, eval_worlds, repeats, option, seed, out, greedy, quiet
+        )

@@ -6,25 +6,23 @@ from pathlib import Path
 
 import typer
 
-from worldagent.commands.common import console, friendly_errors
-
-
-def status_line(text: str) -> None:
-    """One status line per phase, printed as is (no rich markup: configs hold brackets)."""
-    console.print(text, markup=False, highlight=False)
+from worldagent.commands.console import console, friendly_errors, status_line
 
 
 def register(app: typer.Typer) -> None:
     """Add ``reproduce`` and ``report`` to the CLI."""
+    from worldagent.envs import registry
 
     @app.command()
     @friendly_errors
     def reproduce(
         preset: str = typer.Option("quick", "--preset", help="quick (about 15 min on 2 CPU cores), paper (the paper's budgets; a GPU) or tiny (CI)."),
-        env: str = typer.Option("all", "--env", help="racing, harvest or all."),
+        env: str = typer.Option("all", "--env", help=f"all, or one of: {', '.join(registry.names())}."),
         out: Path = typer.Option(None, "--out", help="Run directory (default runs/PRESET); a rerun skips finished phases, a killed run resumes."),
         algo: str = typer.Option(
-            None, "--algo", help="Racing agents: ppo (the default: it learnt to lap for 3 seeds of 3) or acktr (the paper's; 1 of 3)."
+            None,
+            "--algo",
+            help="Training algorithm for every env that has it (default: each env's own, `worldagent envs`; racing ppo learnt to lap for 3 seeds of 3, the paper's acktr for 1).",
         ),
         restart: list[str] = typer.Option(
             [],
@@ -44,7 +42,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(chosen.show())
             return
         out = out or Path("runs") / chosen.name
-        manifest = run(chosen, out, resolve_envs(env), restart=restart, progress=not quiet, echo=status_line)
+        manifest = run(chosen, out, resolve_envs(env, chosen), restart=restart, progress=not quiet, echo=status_line)
         failed = [key for key, entry in manifest.data["phases"].items() if entry.get("status") == "failed"]
         if failed:
             console.print(f"[yellow]finished with failed phase(s): {', '.join(failed)} (see the report)[/yellow]")

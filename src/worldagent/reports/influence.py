@@ -3,8 +3,7 @@
 Left, one small panel per metric (their scales differ: a raw return of -300 next to a crash
 rate of 0.1 would flatten the rates) with a bar for each training regime and its 95%
 confidence interval over seeds; right, up to four example worlds of the influenced training
-distribution, drawn as the envs draw them (racing ``track_image``, harvest ``draw_map`` with the
-tagging agent 0 in blue).
+distribution, drawn as the environment draws them (``spec.pictures.world``).
 """
 
 from __future__ import annotations
@@ -15,6 +14,8 @@ from typing import Any
 import jax
 import numpy as np
 
+from worldagent.envs import registry
+from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
 from worldagent.files import write_atomically
 from worldagent.reports.figures import _pyplot
@@ -38,17 +39,19 @@ def metric_label(metric: str) -> str:
     return LABELS.get(metric, metric.replace("_", " "))
 
 
-def world_image(env_name: str, world: Any) -> np.ndarray:
-    """uint8[H, W, 3] picture of one (unbatched) world."""
-    if env_name == "racing":
-        from worldagent.envs.racing.render import track_image
+def world_image(spec: str | EnvSpec, world: Any, size: int = 192) -> np.ndarray:
+    """uint8[H, W, 3] picture of one (unbatched) world (``spec.pictures.world``)."""
+    return np.asarray(registry.get(spec).pictures.world(world, size).convert("RGB"))
 
-        return np.asarray(track_image(world, size=192))
-    if env_name == "harvest":
-        from worldagent.envs.harvest.render import draw_map
 
-        return np.asarray(draw_map(world, cell=8))
-    raise WorldagentError(f"unknown environment {env_name!r}; use racing or harvest.")
+def influence_examples(run_dir: Path | str, spec: str | EnvSpec, count: int = MAX_EXAMPLES) -> Any:
+    """Up to ``count`` worlds of an influencing run's new training distribution (batched), for the figure."""
+    from worldagent.influence.cache import load_influenced_worlds
+    from worldagent.influence.worlds import example_indices
+
+    worlds, _, values = load_influenced_worlds(run_dir, registry.get(spec))
+    picks = np.asarray(example_indices(values, count))
+    return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[picks], worlds)
 
 
 def _interval(entry: dict) -> float:
@@ -57,7 +60,7 @@ def _interval(entry: dict) -> float:
     return float("nan") if value is None else float(value)
 
 
-def influence_figure(result: dict, example_worlds: Any, env_name: str, out: Path | str) -> Path:
+def influence_figure(result: dict, example_worlds: Any, spec: str | EnvSpec, out: Path | str) -> Path:
     """Draw Figure 8 for one environment to ``out`` (PNG, written atomically).
 
     Args:
@@ -65,7 +68,7 @@ def influence_figure(result: dict, example_worlds: Any, env_name: str, out: Path
             its ``metrics``, ``summary`` ({metric: {label: {mean, ci95, seeds}}}) and selection.
         example_worlds: a batched world pytree (leading axis k) of the influenced
             distribution; the first ``min(k, 4)`` are drawn (None: no examples).
-        env_name: "racing" or "harvest".
+        spec: the environment (its name or ``EnvSpec``): it draws the example worlds.
         out: the PNG path.
 
     Returns:
@@ -74,6 +77,7 @@ def influence_figure(result: dict, example_worlds: Any, env_name: str, out: Path
     summary, metrics = result.get("summary"), result.get("metrics")
     if not summary or not metrics:
         raise WorldagentError("the result has no summary; pass what influence() returned or influence.json.")
+    spec = registry.get(spec)
     examples = _examples(example_worlds)
     plt = _pyplot()
     columns = len(metrics) + (2 if examples else 0)
@@ -100,12 +104,12 @@ def influence_figure(result: dict, example_worlds: Any, env_name: str, out: Path
         axis.tick_params(axis="y", labelsize=7)
     for j, world in enumerate(examples):
         axis = figure.add_subplot(grid[j // 2, len(metrics) + j % 2])
-        axis.imshow(world_image(env_name, world), interpolation="nearest")
+        axis.imshow(world_image(spec, world), interpolation="nearest")
         axis.set_axis_off()
     seeds = max((e.get("seeds", 0) for m in metrics for e in summary[m].values()), default=0)
     selection = result.get("selection", {}).get("describe", "")
     figure.suptitle(
-        f"{env_name}: default vs influenced training "
+        f"{spec.name}: default vs influenced training "
         + (f"(mean over {seeds} seeds, 95% CI)" if seeds > 1 else "(one seed: no CI)")
         + (f"; new training worlds: {selection}" if selection else ""),
         fontsize=9,

@@ -1,7 +1,7 @@
 """``manifest.json``: what a ``reproduce`` run directory holds, and how far it got.
 
 The manifest is the run directory's ledger. It records the preset and its whole config, the
-seed, package versions, the device, and per phase (``"racing/agent"``, ..., ``"report"``)::
+seed, package versions, the device, and per phase (``"<env>/agent"``, ..., ``"report"``)::
 
     status    "running" | "done" | "failed"
     config    the preset's slice this phase depends on (``Preset.phase_config``)
@@ -104,7 +104,7 @@ class Manifest:
     def begin_run(self, preset_name: str, config: dict, envs: list[str]) -> None:
         """Record the preset, seeds, versions and device of this invocation."""
         self.data.update(preset=preset_name, config=config, seed=config.get("seed"), versions=versions(), device=device())
-        self.data["envs"] = [e for e in ("racing", "harvest") if e in set(self.data.get("envs", [])) | set(envs)]
+        self.data["envs"] = list(dict.fromkeys([*self.data.get("envs", []), *envs]))  # earlier runs' first, in order
         self.data.setdefault("runs", []).append({"started": time.time(), "preset": preset_name, "envs": envs})
         self.save()
 

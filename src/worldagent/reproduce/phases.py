@@ -1,20 +1,13 @@
 """The phases of the paper's pipeline for one environment (paper §4–§6), one function each.
 
 Each phase is ``phase(ctx) -> outputs``: it reads what earlier phases left in the
-environment's directory, writes its own results there, and returns a small JSON-able dict
-(paths relative to the run directory, a few numbers and a one-line ``summary``) for the
-manifest. Phases rely on their layer's own resume: the VAE and the agents restart from their
+environment's directory (``layout.RunLayout``), writes its own results there, and returns a
+small JSON-able dict (paths relative to the run directory, a few numbers and a one-line
+``summary``) for the manifest. The experiments themselves are calls into
+``worldagent.experiments``; a phase only chooses the preset's budgets and draws the figures.
+Phases rely on their layer's own resume: the VAE and the agents restart from their
 checkpoints, campaigns from the run store, the influence experiment from its cache, so a
 phase interrupted half-way loses little when it runs again.
-
-Layout of ``<run>/<env>/``::
-
-    dataset.npz            the procedurally generated worlds (paper §5.2.1)
-    generator/             the VAE and G(z) (quality.json: its quality figures)
-    agent/                 the training run (checkpoint, curve.csv/png, the saved agent)
-    store.sqlite           random / strategic (min, max) / comparison campaigns
-    influence/             the influencing experiment (influence.json, its agents)
-    figures/               figures drawn by phases that roll agents out
 """
 
 from __future__ import annotations
@@ -27,30 +20,14 @@ from typing import Any
 
 import numpy as np
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
-from worldagent.reproduce.presets import TAGGER, Preset
+from worldagent.reproduce.layout import RunLayout
+from worldagent.reproduce.presets import Preset
 
 QUALITY_SAMPLES = 1000  # draws z ~ N(0, I) for the generator's coverage / validity figures
-
-
-def reward_metric(env: str) -> str:
-    """The paper's main metric of ``env`` (racing return, harvest group reward; §4.4)."""
-    from worldagent.search.objectives import metric_name
-
-    return metric_name(env, "reward")
-
-
-def campaign_names(env: str, seed: int) -> dict[str, str]:
-    """Store names of the random and strategic campaigns (those of ``search.experiments``)."""
-    metric = reward_metric(env)
-    return {"random": f"random-{metric}-s{seed}", "min": f"cmaes-min-{metric}-s{seed}", "max": f"cmaes-max-{metric}-s{seed}"}
-
-
-def compare_names(env: str, seeds, optimisers=("cmaes", "bo", "random")) -> dict[str, list[str]]:
-    """Store names of the comparison campaigns, by optimiser (``search.experiments.compare_optimisers``)."""
-    metric = reward_metric(env)
-    return {opt: [f"compare-{opt}-min-{metric}-s{seed}" for seed in seeds] for opt in optimisers}
+OPTIMISERS = ("cmaes", "bo", "random")
 
 
 @dataclass
@@ -59,7 +36,7 @@ class EnvContext:
 
     Attributes:
         run_dir: the run directory.
-        env: "racing" or "harvest".
+        env: the registered environment's name.
         preset: the run's preset.
         progress: show progress bars.
     """
@@ -71,8 +48,12 @@ class EnvContext:
     _cache: dict = field(default_factory=dict, repr=False)
 
     @property
-    def dir(self) -> Path:
-        return self.run_dir / self.env
+    def layout(self) -> RunLayout:
+        return RunLayout(Path(self.run_dir), self.env)
+
+    @property
+    def spec(self):
+        return registry.get(self.env)
 
     @property
     def budgets(self):
@@ -83,57 +64,46 @@ class EnvContext:
         return self.preset.seed
 
     @property
-    def dataset_path(self) -> Path:
-        return self.dir / "dataset.npz"
+    def metric(self) -> str:
+        """The paper's main metric of the env (racing return, harvest group reward; §4.4)."""
+        return self.spec.metrics.main
 
     @property
-    def generator_dir(self) -> Path:
-        return self.dir / "generator"
-
-    @property
-    def agent_dir(self) -> Path:
-        return self.dir / "agent"
-
-    @property
-    def store_path(self) -> Path:
-        return self.dir / "store.sqlite"
-
-    @property
-    def figures(self) -> Path:
-        return self.dir / "figures"
-
-    def rel(self, path: Path) -> str:
-        """``path`` relative to the run directory (the run directory may be moved)."""
-        return str(Path(path).relative_to(self.run_dir))
+    def algo(self) -> str:
+        return self.preset.algo_of(self.env)
 
     def cached(self, name: str, make: Callable[[], Any]) -> Any:
         if name not in self._cache:
             self._cache[name] = make()
         return self._cache[name]
 
-    def generator(self):
-        """G(z) from this run's generator directory and dataset."""
+    def setup(self):
+        """``experiments.Setup``: the trained agents on this run's G(z), with the reproduce options."""
+        from worldagent import experiments
         from worldagent.worlds.generator import load_generator
 
-        return self.cached("generator", lambda: load_generator(self.generator_dir, self.dataset_path)[0])
+        def make():
+            generator = load_generator(self.layout.generator_dir, self.layout.dataset_path)[0]
+            options = dict(self.spec.reproduce_options)
+            return experiments.setup(self.env, str(self.layout.agent_dir), generator, options=options, repeats=self.preset.repeats)
 
-    def policy(self):
-        """The trained agent(s) of the agent phase."""
-        from worldagent.agents.policy import load_policy
+        return self.cached("setup", make)
 
-        where = self.agent_dir / ("policy" if self.env == "racing" else "agents")
-        return self.cached("policy", lambda: load_policy(where, env=self.env).policy)
+    def train_config(self, episodes: int):
+        """The env's algorithm's config at ``episodes``, with the preset's parallel envs / warm-up."""
+        from worldagent.agents.algorithms import training_config
 
-    def env_and_params(self):
-        """The env object and its params (harvest: agent 0 may TAG, §6.2.2)."""
-        from worldagent.commands.common import env_and_params
-
-        return self.cached("env", lambda: env_and_params(self.env, [TAGGER] if self.env == "harvest" else []))
+        b = self.budgets
+        overrides = {
+            **({"num_envs": b.train_envs} if b.train_envs else {}),
+            **({"learning_starts": b.learning_starts} if b.learning_starts is not None else {}),
+        }
+        return training_config(self.spec, self.algo, episodes=episodes, **overrides)
 
     def store(self):
         from worldagent.store import RunStore
 
-        return RunStore(self.store_path)
+        return RunStore(self.layout.store_path)
 
 
 # -- phase 1: worlds and the generator (paper §4.2, §5.2.1) ---------------------------------------
@@ -144,9 +114,9 @@ def dataset_phase(ctx: EnvContext) -> dict:
     from worldagent.worlds.dataset import make_dataset
 
     data = make_dataset(ctx.env, ctx.budgets.worlds, ctx.seed, progress=ctx.progress)
-    data.save(ctx.dataset_path)
+    data.save(ctx.layout.dataset_path)
     return {
-        "dataset": ctx.rel(ctx.dataset_path),
+        "dataset": ctx.layout.rel(ctx.layout.dataset_path),
         "worlds": len(data),
         "fingerprint": data.fingerprint,
         "summary": f"{len(data):,} worlds (fingerprint {data.fingerprint})",
@@ -168,30 +138,30 @@ def generator_phase(ctx: EnvContext) -> dict:
     from worldagent.worlds.dataset import WorldDataset
     from worldagent.worlds.generator import build_generator, save_generator
     from worldagent.worlds.pictures import traversal_sheet
-    from worldagent.worlds.quality import harvest_figures, racing_figures, reconstruction
+    from worldagent.worlds.quality import figures, reconstruction
     from worldagent.worlds.vae import split_holdout, train_vae
 
-    data = WorldDataset.load(ctx.dataset_path, env=ctx.env)
+    layout = ctx.layout
+    data = WorldDataset.load(layout.dataset_path, env=ctx.env)
     config = vae_config(ctx.preset, ctx.env)
-    vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=ctx.generator_dir)
+    vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=layout.generator_dir)
     generator = build_generator(vae, data)
-    save_generator(ctx.generator_dir, vae, ctx.dataset_path, generator)
+    save_generator(layout.generator_dir, vae, layout.dataset_path, generator)
     train, held = split_holdout(len(data), config.holdout, config.seed)
-    key = jax.random.key(ctx.seed)
     quality = {
         "env": ctx.env,
         "worlds": len(data),
         "reconstruction": reconstruction(generator, data, held, train),
-        ctx.env: (racing_figures(generator, data, QUALITY_SAMPLES, key) if ctx.env == "racing" else harvest_figures(generator, QUALITY_SAMPLES, key)),
+        ctx.env: figures(generator, data, QUALITY_SAMPLES, jax.random.key(ctx.seed)),
         "training": {"epochs": len(vae.history), "final": vae.history[-1], "history": vae.history},
     }
-    quality_path = write_text(ctx.generator_dir / "quality.json", json.dumps(quality, indent=1))
-    traversals = traversal_sheet(generator, ctx.figures / "generator_traversals.png")
+    quality_path = write_text(layout.quality_path, json.dumps(quality, indent=1))
+    traversals = traversal_sheet(generator, layout.figure("generator_traversals"))
     accuracy = quality["reconstruction"]["vae"]["accuracy"]
     return {
-        "generator": ctx.rel(ctx.generator_dir),
-        "quality": ctx.rel(quality_path),
-        "traversals": ctx.rel(traversals),
+        "generator": layout.rel(layout.generator_dir),
+        "quality": layout.rel(quality_path),
+        "traversals": layout.rel(traversals),
         "final_loss": vae.history[-1]["holdout_loss"],
         "summary": f"{len(vae.history)} epochs, held-out loss {vae.history[-1]['holdout_loss']:.1f}, cell accuracy {accuracy:.3f}",
     }
@@ -200,76 +170,41 @@ def generator_phase(ctx: EnvContext) -> dict:
 # -- phase 2: agents (paper §4.3, §5.3) -----------------------------------------------------------
 
 
-def racing_train_config(preset: Preset):
-    """The racing algorithm's config at the preset's budget."""
-    from worldagent.agents.acktr import ACKTRConfig
-    from worldagent.agents.ppo import PPOConfig
-
-    budgets = preset.budgets("racing")
-    overrides = {"total_episodes": budgets.episodes, **({"num_envs": budgets.train_envs} if budgets.train_envs else {})}
-    return {"acktr": ACKTRConfig, "ppo": PPOConfig}[preset.racing_algo](**overrides)
-
-
-def harvest_train_config(preset: Preset):
-    """The independent-DQN config at the preset's budget, agent 0 the tagger (§6.2.2)."""
-    from worldagent.agents.dqn import DQNConfig
-
-    budgets = preset.budgets("harvest")
-    overrides = {
-        **({"num_envs": budgets.train_envs} if budgets.train_envs else {}),
-        **({"learning_starts": budgets.learning_starts} if budgets.learning_starts is not None else {}),
-    }
-    return DQNConfig(num_episodes=budgets.episodes, tagger=TAGGER, seed=preset.seed, **overrides)
+def last_values(curve: dict, names) -> dict[str, float]:
+    """The learning curve's last value of each of ``names`` it holds."""
+    return {name: float(np.asarray(curve[name])[-1]) for name in names if name in curve and len(curve[name])}
 
 
 def agent_phase(ctx: EnvContext) -> dict:
     """Train the agents on the procedural worlds of the dataset (resuming their checkpoint)."""
     from worldagent.agents.distributions import world_distribution
+    from worldagent.agents.training import train
 
-    distribution = world_distribution(ctx.env, str(ctx.dataset_path))
-    if ctx.env == "racing":
-        import worldagent.agents.acktr  # noqa: F401  (registers ACKTR with the trainer)
-        from worldagent.agents.training import train_racing
-
-        result = train_racing(
-            racing_train_config(ctx.preset),
-            distribution,
-            ctx.agent_dir,
-            ctx.preset.racing_algo,
-            seed=ctx.seed,
-            progress=ctx.progress,
-            resume=True,
-            distribution_spec=ctx.rel(ctx.dataset_path),
-        )
-        last = {k: float(v[-1]) for k, v in result.curve.items() if len(v)}
-        return {
-            "agent": ctx.rel(ctx.agent_dir / "policy"),
-            "curve": ctx.rel(ctx.agent_dir / "curve.png"),
-            "algo": ctx.preset.racing_algo,
-            "episodes": result.episodes,
-            "env_steps": result.env_steps,
-            "train_s": round(result.wall_seconds, 2),
-            "final": last,
-            "summary": f"{ctx.preset.racing_algo} {result.episodes:,} episodes; last update: return {last.get('return', float('nan')):.1f}, "
-            f"crash rate {last.get('crashed', float('nan')):.2f}",
-        }
-    from worldagent.agents.dqn_run import train_harvest
-
-    config = harvest_train_config(ctx.preset)
-    result = train_harvest(config, distribution, ctx.agent_dir, progress=ctx.progress, resume=True)
-    last = result.history[-1] if result.history else {}
-    episodes = config.num_chunks * config.num_envs
+    layout, spec = ctx.layout, ctx.spec
+    result = train(
+        spec,
+        ctx.algo,
+        ctx.train_config(ctx.budgets.episodes),
+        world_distribution(spec, str(layout.dataset_path)),
+        layout.agent_dir,
+        seed=ctx.seed,
+        options=dict(spec.reproduce_options),
+        progress=ctx.progress,
+        resume=True,
+        distribution_spec=layout.rel(layout.dataset_path),
+    )
+    last = last_values(result.curve, (spec.metrics.main, *spec.metrics.highlighted))
+    shown = ", ".join(f"{name} {value:.3g}" for name, value in last.items())
     return {
-        "agent": ctx.rel(ctx.agent_dir / "agents"),
-        "curve": ctx.rel(ctx.agent_dir / "curve.png"),
-        "algo": "dqn",
-        "tagger": TAGGER,
-        "episodes": episodes,
+        "agent": layout.rel(layout.agent_dir / "policy"),
+        "curve": layout.rel(layout.agent_dir / "curve.png"),
+        "algo": ctx.algo,
+        **({"options": dict(spec.reproduce_options)} if spec.reproduce_options else {}),
+        "episodes": result.episodes,
         "env_steps": result.env_steps,
-        "train_s": round(result.wall_s, 2),
-        "final": {k: last[k] for k in ("group_reward", "equality", "conflict") if k in last},
-        "summary": f"4 DQNs, {episodes:,} episodes; last chunk: group reward {last.get('group_reward', float('nan')):.1f}, "
-        f"conflict {last.get('conflict', float('nan')):.2f}",
+        "train_s": round(result.wall_seconds, 2),
+        "final": last,
+        "summary": f"{ctx.algo} {result.episodes:,} episodes; last update: {shown or 'no curve'}",
     }
 
 
@@ -278,77 +213,68 @@ def agent_phase(ctx: EnvContext) -> dict:
 
 def random_phase(ctx: EnvContext) -> dict:
     """Evaluate the agents on random worlds z ~ N(0, I) (paper §6.1.1, Figure 6a)."""
-    from worldagent.search.experiments import random_evaluation
+    from worldagent import experiments
 
-    metric = reward_metric(ctx.env)
-    env, params = ctx.env_and_params()
     with ctx.store() as store:
-        evaluations = random_evaluation(
-            store,
-            ctx.env,
-            env,
-            ctx.policy(),
-            ctx.generator(),
-            params,
-            metric,
-            worlds=ctx.budgets.random_worlds,
-            repeats=ctx.preset.repeats,
-            seed=ctx.seed,
-            progress=ctx.progress,
-            resume=True,
+        evaluations = experiments.random_evaluation(
+            store, ctx.setup(), ctx.metric, worlds=ctx.budgets.random_worlds, seed=ctx.seed, progress=ctx.progress, resume=True
         )
     scores = np.array([e.score for e in evaluations])
     return {
-        "store": ctx.rel(ctx.store_path),
-        "campaign": campaign_names(ctx.env, ctx.seed)["random"],
+        "store": ctx.layout.rel(ctx.layout.store_path),
+        "campaign": experiments.campaign_names(ctx.metric, ctx.seed)["random"],
         "worlds": len(scores),
         "mean": float(np.nanmean(scores)),
-        "summary": f"{len(scores):,} worlds x {ctx.preset.repeats} episodes; mean {metric} {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})",
+        "summary": f"{len(scores):,} worlds x {ctx.preset.repeats} episodes; mean {ctx.metric} {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})",
     }
 
 
 def random_scores(ctx: EnvContext) -> np.ndarray:
     """Per-world scores of the random evaluation (the baseline of Figures 6b and 7)."""
+    from worldagent import experiments
+
     with ctx.store() as store:
-        return np.array([e.score for e in store.evaluations(campaign_names(ctx.env, ctx.seed)["random"])])
+        return np.array([e.score for e in store.evaluations(experiments.campaign_names(ctx.metric, ctx.seed)["random"])])
 
 
 def strategic_phase(ctx: EnvContext) -> dict:
     """CMA-ES searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b)."""
+    from worldagent import experiments
     from worldagent.reports.strategic import strategic_figure
-    from worldagent.search.experiments import strategic_evaluation
 
-    metric = reward_metric(ctx.env)
-    env, params = ctx.env_and_params()
-    policy = ctx.policy()
+    setup = ctx.setup()
     with ctx.store() as store:
-        result = strategic_evaluation(
-            store,
-            ctx.env,
-            env,
-            policy,
-            ctx.generator(),
-            params,
-            metric,
-            budget=ctx.budgets.strategic_budget,
-            repeats=ctx.preset.repeats,
-            seed=ctx.seed,
-            optimiser="cmaes",
-            progress=ctx.progress,
-            resume=True,
+        result = experiments.strategic_evaluation(
+            store, setup, ctx.metric, budget=ctx.budgets.strategic_budget, seed=ctx.seed, optimiser="cmaes", progress=ctx.progress, resume=True
         )
     low, high = result["min"], result["max"]
     figure = strategic_figure(
-        ctx.env, env, policy, params, low, high, random_scores(ctx), metric, ctx.figures / "strategic.png", key=result.get("keys")
+        setup.spec,
+        setup.env,
+        setup.policy,
+        setup.params,
+        low,
+        high,
+        random_scores(ctx),
+        ctx.metric,
+        ctx.layout.figure("strategic"),
+        key=result.get("keys"),
     )
     return {
-        "store": ctx.rel(ctx.store_path),
+        "store": ctx.layout.rel(ctx.layout.store_path),
         "campaigns": list(result["campaigns"]),
         "min": float(low.score),
         "max": float(high.score),
-        "figure": ctx.rel(figure),
-        "summary": f"{metric}: min {low.score:.4g}, max {high.score:.4g} ({ctx.budgets.strategic_budget} worlds each)",
+        "figure": ctx.layout.rel(figure),
+        "summary": f"{ctx.metric}: min {low.score:.4g}, max {high.score:.4g} ({ctx.budgets.strategic_budget} worlds each)",
     }
+
+
+def compare_names(ctx: EnvContext, optimisers=OPTIMISERS) -> dict[str, list[str]]:
+    """Store names of the comparison campaigns, by optimiser."""
+    from worldagent import experiments
+
+    return {opt: [experiments.comparison_campaign_name(opt, False, ctx.metric, s) for s in ctx.budgets.compare_seeds] for opt in optimisers}
 
 
 def compare_phase(ctx: EnvContext) -> dict:
@@ -356,43 +282,29 @@ def compare_phase(ctx: EnvContext) -> dict:
     budgets = ctx.budgets
     if budgets.compare_budget < 1:
         return {"skipped": "the preset's compare_budget is 0", "summary": "skipped (compare_budget 0)"}
+    from worldagent import experiments
     from worldagent.reports.comparison import comparison_figure
-    from worldagent.search.experiments import compare_optimisers
 
-    metric = reward_metric(ctx.env)
-    env, params = ctx.env_and_params()
-    runs = {}
     with ctx.store() as store:
-        for optimisers, budget in (
-            (("cmaes",), budgets.compare_budget),
-            (("bo",), budgets.bo_budget or budgets.compare_budget),
-            (("random",), budgets.compare_budget),
-        ):
-            runs.update(
-                compare_optimisers(
-                    store,
-                    ctx.env,
-                    env,
-                    ctx.policy(),
-                    ctx.generator(),
-                    params,
-                    metric,
-                    maximize=False,
-                    optimisers=optimisers,
-                    budget=budget,
-                    seeds=tuple(budgets.compare_seeds),
-                    repeats=ctx.preset.repeats,
-                    progress=ctx.progress,
-                    resume=True,
-                )
-            )
-    figure = comparison_figure(runs, random_scores(ctx), metric, ctx.figures / "comparison.png", maximize=False)
+        runs = experiments.compare_optimisers(
+            store,
+            ctx.setup(),
+            ctx.metric,
+            maximize=False,
+            optimisers=OPTIMISERS,
+            budget=budgets.compare_budget,
+            budgets={"bo": budgets.bo_budget} if budgets.bo_budget else None,
+            seeds=tuple(budgets.compare_seeds),
+            progress=ctx.progress,
+            resume=True,
+        )
+    figure = comparison_figure(runs, random_scores(ctx), ctx.metric, ctx.layout.figure("comparison"), maximize=False)
     best = {opt: float(np.nanmin(np.concatenate([np.ravel(r) for r in scores]))) for opt, scores in runs.items()}
     return {
-        "store": ctx.rel(ctx.store_path),
-        "campaigns": compare_names(ctx.env, budgets.compare_seeds, tuple(runs)),
+        "store": ctx.layout.rel(ctx.layout.store_path),
+        "campaigns": compare_names(ctx, tuple(runs)),
         "best": best,
-        "figure": ctx.rel(figure),
+        "figure": ctx.layout.rel(figure),
         "summary": "lowest " + ", ".join(f"{opt} {value:.4g}" for opt, value in best.items()),
     }
 
@@ -402,51 +314,34 @@ def compare_phase(ctx: EnvContext) -> dict:
 
 def influence_phase(ctx: EnvContext) -> dict:
     """Retrain agents on worlds with a desired property and compare them with default training (§6.2, Figure 8)."""
-    from worldagent.influence.experiment import example_indices, influence, load_influenced_worlds
-    from worldagent.influence.selection import parse_selection
-    from worldagent.reports.influence import influence_figure
+    from worldagent import experiments
+    from worldagent.reports.influence import influence_examples, influence_figure
 
-    budgets = ctx.budgets
-    env, params = ctx.env_and_params()
-    racing = ctx.env == "racing"
-    out = ctx.dir / "influence"
-    result = influence(
-        out,
-        ctx.env,
-        ctx.policy(),
-        ctx.generator(),
-        params,
-        parse_selection(ctx.preset.selection(ctx.env), ctx.env),
-        algo=ctx.preset.algo(ctx.env),
+    budgets, layout = ctx.budgets, ctx.layout
+    setup = ctx.setup()
+    result = experiments.influence(
+        layout.influence_dir,
+        setup,
+        ctx.preset.selection(ctx.env),
+        algo=ctx.algo,
         episodes=budgets.influence_episodes,
         seeds=tuple(budgets.influence_seeds),
         candidates=budgets.influence_candidates,
         search_budget=budgets.influence_search_budget,
         eval_worlds=budgets.influence_eval_worlds,
-        repeats=ctx.preset.repeats,
-        tagger=None if racing else TAGGER,
-        progress=ctx.progress,
-        config=racing_train_config(ctx.preset) if racing else harvest_train_config(ctx.preset),
-        env=env,
+        config=ctx.train_config(budgets.influence_episodes),
         seed=ctx.seed,
+        progress=ctx.progress,
     )
-    worlds, _, values = load_influenced_worlds(out, ctx.env)
-    examples = take_worlds(worlds, example_indices(values, 4))
-    figure = influence_figure(result, examples, ctx.env, ctx.figures / "influence.png")
+    examples = influence_examples(layout.influence_dir, setup.spec)
+    figure = influence_figure(result, examples, setup.spec, layout.figure("influence"))
     return {
-        "influence": ctx.rel(out / "influence.json"),
-        "figure": ctx.rel(figure),
+        "influence": layout.rel(layout.influence_result),
+        "figure": layout.rel(figure),
         "selection": ctx.preset.selection(ctx.env),
         "selected": result["worlds"]["selected"],
         "summary": influence_summary(result),
     }
-
-
-def take_worlds(worlds, indices):
-    """The worlds at ``indices`` of a batched world pytree (still batched)."""
-    import jax
-
-    return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[np.asarray(indices)], worlds)
 
 
 def influence_summary(result: dict) -> str:

@@ -15,25 +15,27 @@ that phase's result, and the run carries on to the report instead of crashing.
 from __future__ import annotations
 
 import shutil
-import sqlite3
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.manifest import Manifest, phase_key
-from worldagent.reproduce.phases import PHASE_FUNCTIONS, EnvContext, dependents
-from worldagent.reproduce.presets import ENVS, PHASES, Preset
+from worldagent.reproduce.phases import PHASE_FUNCTIONS, EnvContext, compare_names, dependents
+from worldagent.reproduce.presets import PHASES, Preset
 
 TOLERATED = ("influence",)  # phases whose failure is a result, not the end of the run
 
 
-def resolve_envs(env: str) -> list[str]:
-    """``"all"`` → both environments; otherwise the one named."""
+def resolve_envs(env: str, preset: Preset) -> list[str]:
+    """``"all"`` → every environment the preset has budgets for; otherwise the one named."""
     if env == "all":
-        return list(ENVS)
-    if env not in ENVS:
-        raise WorldagentError(f"unknown environment {env!r}; use racing, harvest or all.")
+        return list(preset.envs)
+    if env not in preset.envs:
+        known = ", ".join(preset.envs)
+        registry.get(env)  # an unregistered name says so first
+        raise WorldagentError(f"{env} has no {preset.name!r} preset; use one of: {known} or all.")
     return [env]
 
 
@@ -51,7 +53,7 @@ def reproduce(
     Args:
         preset: budgets and seeds (``presets.PRESETS``).
         out: the run directory (created).
-        envs: environments, from ``resolve_envs``.
+        envs: environments, from ``resolve_envs`` (each with budgets in ``preset``).
         restart: phases to redo from scratch, with everything computed from them.
         progress: show progress bars.
         echo: where the one status line per phase goes.
@@ -126,48 +128,31 @@ def forget_phases(manifest: Manifest, ctx: EnvContext, phases: list[str]) -> Non
     """Remove the outputs of ``phases`` of one environment and drop them from the manifest."""
     if not phases:
         return
-    outputs = {
-        "dataset": [ctx.dataset_path],
-        "generator": [ctx.generator_dir, ctx.figures / "generator_traversals.png"],
-        "agent": [ctx.agent_dir],
-        "strategic": [ctx.figures / "strategic.png"],
-        "compare": [ctx.figures / "comparison.png"],
-        "influence": [ctx.dir / "influence", ctx.figures / "influence.png"],
-    }
+    layout = ctx.layout
+    outputs = layout.phase_outputs()
     for phase in phases:
         for path in outputs.get(phase, []):
             remove(path)
     if "random" in phases:
         for suffix in ("", "-wal", "-shm"):
-            remove(Path(f"{ctx.store_path}{suffix}"))
-    else:
-        drop_campaigns(ctx.store_path, store_campaigns(ctx, phases))
+            remove(Path(f"{layout.store_path}{suffix}"))
+    elif layout.store_path.exists():
+        from worldagent.store import RunStore
+
+        with RunStore(layout.store_path) as store:
+            store.delete_campaigns(store_campaigns(ctx, phases))
     manifest.forget([phase_key(ctx.env, phase) for phase in phases])
 
 
 def store_campaigns(ctx: EnvContext, phases: list[str]) -> list[str]:
     """Names of the store campaigns written by ``phases``."""
-    from worldagent.reproduce.phases import campaign_names, compare_names
+    from worldagent import experiments
 
-    names = campaign_names(ctx.env, ctx.seed)
+    names = experiments.campaign_names(ctx.metric, ctx.seed)
     found = [names["min"], names["max"]] if "strategic" in phases else []
     if "compare" in phases:
-        found += [n for group in compare_names(ctx.env, ctx.budgets.compare_seeds).values() for n in group]
+        found += [n for group in compare_names(ctx).values() for n in group]
     return found
-
-
-def drop_campaigns(store_path: Path, names: list[str]) -> None:
-    """Delete campaigns and their evaluations from a run store (a restarted phase starts clean)."""
-    if not names or not store_path.exists():
-        return
-    db = sqlite3.connect(store_path, timeout=30.0)
-    try:
-        with db:
-            marks = ",".join("?" * len(names))
-            db.execute(f"DELETE FROM evaluations WHERE campaign_id IN (SELECT id FROM campaigns WHERE name IN ({marks}))", names)
-            db.execute(f"DELETE FROM campaigns WHERE name IN ({marks})", names)
-    finally:
-        db.close()
 
 
 def remove(path: Path) -> None:

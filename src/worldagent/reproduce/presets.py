@@ -1,6 +1,9 @@
 """Presets of ``worldagent reproduce``: the budgets of each phase of the paper's pipeline.
 
-Three presets, frozen dataclasses so a run directory can record exactly what ran:
+Three presets, frozen dataclasses so a run directory can record exactly what ran. Their
+budgets per environment are Python data in each environment's registration
+(``EnvSpec.presets[name]``), so an environment registered with presets joins ``reproduce`` with
+no edit here:
 
 - ``paper``: the paper's budgets (§5.2–§6: 10,000 worlds, 10,000 racing / 5,000 harvest
   training episodes, CMA-ES population 21, 8 episodes per world, 1,000 random worlds). Search
@@ -20,15 +23,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
-ENVS = ("racing", "harvest")
 PHASES = ("dataset", "generator", "agent", "random", "strategic", "compare", "influence")
-RACING_ALGOS = ("acktr", "ppo")
-SELECTIONS = {"racing": "crash_rate > 0.5", "harvest": "conflict == 0"}  # paper §6.2.1, §6.2.2
-TAGGER = 0  # harvest: the agent allowed to TAG (paper §6.2.2)
+OPTIONAL_BUDGETS = ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts")  # 0 / None allowed
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,7 @@ class EnvBudgets:
         influence_seeds: training seeds of the influencing experiment.
         influence_search_budget: extra CMA-ES evaluations searching for selectable worlds (ours).
         influence_selection: the property of the influenced training worlds ("": the paper's,
-            ``SELECTIONS``). Our racing agents crash ~10× less often than the paper's (crash
+            ``spec.selection``). Our racing agents crash ~10× less often than the paper's (crash
             rate 0.01–0.07 against 0.11), so worlds with a crash rate above 0.5 are rare: for
             the PPO agent 2 of 1,000 random worlds; a 2,100-world CMA-ES search found 303 more
             but only 9 distinct tracks, and agents trained on those failed (3 seeds: crash rate
@@ -84,79 +86,80 @@ class EnvBudgets:
 
 @dataclass(frozen=True)
 class Preset:
-    """Everything ``worldagent reproduce`` needs to know, for both environments.
+    """Everything ``worldagent reproduce`` needs to know, for every environment that has the preset.
 
     Attributes:
         name: the preset's name (the default run directory is ``runs/<name>``).
         description: one line on what it is for.
+        envs: {env name: its budgets}, from ``EnvSpec.presets[name]`` of every registered env.
         seed: the seed of every phase (datasets, VAEs, training, searches).
         repeats: episodes per evaluated world (paper §5.2.2: 8).
         vae_hidden: encoder widths; the decoder is the transpose (paper §5.2.1: 1024, 512).
         vae_batch_size: VAE minibatch.
-        racing_algo: "ppo" or "acktr" (the paper's, §5.3). PPO by default: at 10,000 episodes
-            on G(z) it learnt to lap for 3 seeds of 3 (lap rate 0.93–0.96), ACKTR for 1 of 3.
-        racing: budgets of Particle Racing.
-        harvest: budgets of Resource Harvest.
+        algo: the training algorithm for every env whose ``spec.algorithms`` has it (``--algo``);
+            None: each env's ``spec.default_algorithm`` (racing PPO: at 10,000 episodes on G(z)
+            it learnt to lap for 3 seeds of 3, the paper's ACKTR for 1 of 3; harvest DQN).
     """
 
     name: str
     description: str
-    racing: EnvBudgets
-    harvest: EnvBudgets
+    envs: Mapping[str, EnvBudgets] = field(default_factory=dict)
     seed: int = 0
     repeats: int = 8
     vae_hidden: tuple[int, ...] = (1024, 512)
     vae_batch_size: int = 128
-    racing_algo: str = "ppo"
+    algo: str | None = None
 
     def __post_init__(self):
-        if self.racing_algo not in RACING_ALGOS:
-            raise WorldagentError(f"racing algorithm {self.racing_algo!r}; use one of: {', '.join(RACING_ALGOS)}.")
         if self.repeats < 1 or self.seed < 0:
             raise WorldagentError(f"repeats={self.repeats}, seed={self.seed}; repeats must be >= 1 and the seed >= 0.")
-        for env in ENVS:
-            budgets = self.budgets(env)
+        if self.algo is not None and not any(self.algo in registry.get(env).algorithms for env in self.envs):
+            known = sorted({a for env in self.envs for a in registry.get(env).algorithms})
+            raise WorldagentError(f"algorithm {self.algo!r} trains none of {', '.join(self.envs)}; use one of: {', '.join(known)}.")
+        for env, budgets in self.envs.items():
             small = [
                 f.name
                 for f in dataclasses.fields(budgets)
-                if isinstance(getattr(budgets, f.name), int)
-                and f.name not in ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts")
-                and getattr(budgets, f.name) < 1
+                if isinstance(getattr(budgets, f.name), int) and f.name not in OPTIONAL_BUDGETS and getattr(budgets, f.name) < 1
             ]
             if small:
                 raise WorldagentError(f"preset {self.name!r}: {env} budgets {', '.join(small)} must be at least 1.")
 
     def budgets(self, env: str) -> EnvBudgets:
         """The budgets of ``env``."""
-        if env not in ENVS:
-            raise WorldagentError(f"unknown environment {env!r}; use racing, harvest or all.")
-        return getattr(self, env)
+        if env not in self.envs:
+            raise WorldagentError(f"preset {self.name!r} has no budgets for {env!r}; use one of: {', '.join(self.envs)} or all.")
+        return self.envs[env]
+
+    def with_budgets(self, env: str, **changes) -> Preset:
+        """This preset with some of ``env``'s budgets changed."""
+        return replace(self, envs={**self.envs, env: replace(self.budgets(env), **changes)})
 
     def to_dict(self) -> dict:
         """JSON-able form (tuples as lists), as recorded in ``manifest.json``."""
-        return json.loads(json.dumps(dataclasses.asdict(self)))
+        return json.loads(json.dumps({**dataclasses.asdict(self), "envs": {e: dataclasses.asdict(b) for e, b in self.envs.items()}}))
 
     def show(self) -> str:
         """The preset as indented JSON (``worldagent reproduce --show``)."""
         return json.dumps(self.to_dict(), indent=2)
 
     def with_algo(self, algo: str | None) -> Preset:
-        """This preset with another racing algorithm (``--algo``)."""
-        return self if algo is None else replace(self, racing_algo=algo)
+        """This preset with another training algorithm where an env has it (``--algo``)."""
+        return self if algo is None else replace(self, algo=algo)
 
     def phase_config(self, env: str, phase: str) -> dict:
         """The settings phase ``phase`` of ``env`` depends on (compared when a run resumes)."""
         b = self.budgets(env)
-        common = {"seed": self.seed}
+        options = dict(registry.get(env).reproduce_options)
         table = {
             "dataset": {"worlds": b.worlds},
             "generator": {"epochs": b.vae_epochs, "hidden": list(self.vae_hidden), "batch_size": self.vae_batch_size},
             "agent": {
-                "algo": self.algo(env),
+                "algo": self.algo_of(env),
                 "episodes": b.episodes,
                 "train_envs": b.train_envs,
                 "learning_starts": b.learning_starts,
-                **({"tagger": TAGGER} if env == "harvest" else {}),
+                **({"options": options} if options else {}),
             },
             "random": {"worlds": b.random_worlds, "repeats": self.repeats},
             "strategic": {"budget": b.strategic_budget, "repeats": self.repeats, "optimiser": "cmaes"},
@@ -175,135 +178,50 @@ class Preset:
                 "seeds": list(b.influence_seeds),
                 "search_budget": b.influence_search_budget,
                 "repeats": self.repeats,
-                "algo": self.algo(env),
+                "algo": self.algo_of(env),
             },
         }
         if phase not in table:
             raise WorldagentError(f"unknown phase {phase!r}; use one of: {', '.join(PHASES)}.")
-        return {**common, **table[phase]}
+        return {"seed": self.seed, **table[phase]}
 
     def selection(self, env: str) -> str:
-        """The influencing experiment's selection of ``env`` (paper §6.2 unless the preset overrides it)."""
-        return self.budgets(env).influence_selection or SELECTIONS[env]
+        """The influencing experiment's selection of ``env`` (``spec.selection`` unless the budgets override it)."""
+        return self.budgets(env).influence_selection or registry.get(env).selection
 
-    def algo(self, env: str) -> str:
-        """The training algorithm of ``env``'s agents (harvest: independent DQN, paper §5.3)."""
-        return self.racing_algo if env == "racing" else "dqn"
+    def algo_of(self, env: str) -> str:
+        """The training algorithm of ``env``'s agents: ``algo`` where the env has it, else its default."""
+        spec = registry.get(env)
+        return self.algo if self.algo in spec.algorithms else spec.default_algorithm
 
 
-PAPER = Preset(
-    name="paper",
-    description="The paper's budgets (10,000 worlds, 10,000 / 5,000 training episodes, population 21, 8 repeats, 1,000 random worlds); for a GPU.",
-    racing=EnvBudgets(
-        worlds=10_000,
-        vae_epochs=25,
-        episodes=10_000,
-        random_worlds=1_000,
-        strategic_budget=2_100,
-        compare_budget=1_050,
-        bo_budget=210,
-        compare_seeds=(0, 1, 2),
-        influence_candidates=1_000,
-        influence_episodes=10_000,
-        influence_eval_worlds=1_000,
-        influence_seeds=(0, 1, 2),
-        influence_selection="crash_rate > 0",
+# name -> (description, settings other than budgets); budgets come from each EnvSpec.presets[name]
+SETTINGS = {
+    "tiny": ("Every phase at a toy budget (CI and tests); the numbers mean nothing.", {"repeats": 2, "vae_hidden": (64, 32), "vae_batch_size": 32}),
+    "quick": ("Small budgets that finish both environments in about 15 minutes on 2 CPU cores and still show every phenomenon.", {}),
+    "paper": (
+        "The paper's budgets (10,000 worlds, 10,000 / 5,000 training episodes, population 21, 8 repeats, 1,000 random worlds); for a GPU.",
+        {},
     ),
-    harvest=EnvBudgets(
-        worlds=10_000,
-        vae_epochs=25,
-        episodes=5_000,
-        random_worlds=1_000,
-        strategic_budget=1_050,
-        compare_budget=525,
-        bo_budget=105,
-        compare_seeds=(0, 1, 2),
-        influence_candidates=1_000,
-        influence_episodes=5_000,
-        influence_eval_worlds=1_000,
-        influence_seeds=(0, 1, 2),
-        influence_search_budget=525,
-    ),
-)
+}
 
-QUICK = Preset(
-    name="quick",
-    description="Small budgets that finish both environments in about 15 minutes on 2 CPU cores and still show every phenomenon.",
-    racing=EnvBudgets(
-        worlds=10_000,
-        vae_epochs=10,
-        episodes=10_000,
-        random_worlds=1_000,
-        strategic_budget=420,
-        compare_budget=210,
-        bo_budget=42,
-        compare_seeds=(0, 1),
-        influence_candidates=500,
-        influence_episodes=10_000,
-        influence_eval_worlds=200,
-        influence_seeds=(0,),
-        influence_selection="crash_rate > 0",
-    ),
-    harvest=EnvBudgets(
-        worlds=5_000,
-        vae_epochs=10,
-        episodes=1_000,
-        random_worlds=200,
-        strategic_budget=105,
-        compare_budget=42,
-        bo_budget=21,
-        compare_seeds=(0,),
-        influence_candidates=200,
-        influence_episodes=400,
-        influence_eval_worlds=50,
-        influence_seeds=(0,),
-        influence_search_budget=210,
-        learning_starts=4_000,
-    ),
-)
 
-TINY = Preset(
-    name="tiny",
-    description="Every phase at a toy budget (CI and tests); the numbers mean nothing.",
-    repeats=2,
-    vae_hidden=(64, 32),
-    vae_batch_size=32,
-    racing=EnvBudgets(
-        worlds=256,
-        vae_epochs=3,
-        episodes=64,
-        random_worlds=42,
-        strategic_budget=21,
-        compare_budget=21,
-        compare_seeds=(0,),
-        influence_candidates=42,
-        influence_episodes=64,
-        influence_eval_worlds=21,
-        influence_seeds=(0,),
-        train_envs=8,
-    ),
-    harvest=EnvBudgets(
-        worlds=256,
-        vae_epochs=3,
-        episodes=4,
-        random_worlds=8,
-        strategic_budget=21,
-        compare_budget=0,
-        compare_seeds=(0,),
-        influence_candidates=8,
-        influence_episodes=4,
-        influence_eval_worlds=4,
-        influence_seeds=(0,),
-        train_envs=4,
-        learning_starts=1_000,
-    ),
-)
-
-PRESETS = {preset.name: preset for preset in (TINY, QUICK, PAPER)}
+def env_budgets(preset_name: str) -> dict[str, EnvBudgets]:
+    """{env: budgets} of every registered environment that has preset ``preset_name``."""
+    found = {}
+    for env in registry.names():
+        values = registry.get(env).presets.get(preset_name)
+        if values is not None:
+            try:
+                found[env] = EnvBudgets(**values)
+            except TypeError as error:
+                raise WorldagentError(f"{env}'s preset {preset_name!r} is malformed ({error}); see reproduce.presets.EnvBudgets.") from None
+    return found
 
 
 def get_preset(name: str) -> Preset:
-    """The preset called ``name``; unknown names are refused with the known ones."""
-    if name not in PRESETS:
-        raise WorldagentError(f"unknown preset {name!r}; use one of: {', '.join(PRESETS)}.")
-    return PRESETS[name]
+    """The preset called ``name``, with the budgets the registered environments give it."""
+    if name not in SETTINGS:
+        raise WorldagentError(f"unknown preset {name!r}; use one of: {', '.join(SETTINGS)}.")
+    description, settings = SETTINGS[name]
+    return Preset(name=name, description=description, envs=env_budgets(name), **settings)

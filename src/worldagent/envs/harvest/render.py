@@ -24,6 +24,7 @@ APPLE = (40, 190, 60)
 AGENT = (220, 40, 40)
 OBSERVER = (40, 90, 230)
 WINDOW = (255, 255, 255)
+AGENT_COLOURS = ((0.95, 0.25, 0.25), (0.25, 0.55, 1.0), (1.0, 0.65, 0.1), (0.85, 0.35, 0.95))  # TL, TR, BL, BR (trajectories)
 
 
 def draw_grid(walls: np.ndarray, apples: np.ndarray, cell: int = 16) -> Image.Image:
@@ -127,3 +128,57 @@ def save_episode_gif(states: HarvestState, path, env: Harvest = Harvest(), obser
         frames.append(draw_state(frame, env, observer, cell).convert("P", palette=Image.Palette.ADAPTIVE, colors=16))
     save = lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)  # noqa: E731
     return write_atomically(path, save)
+
+
+def visit_counts(episodes, shape: tuple[int, int]) -> np.ndarray:
+    """i64[N, H, W]: how many steps each agent stood on each cell, over all episodes, while on the map."""
+    counts = None
+    for e in range(len(episodes)):
+        path, present = episodes.path(e), episodes.present[e, : int(episodes.steps[e]) + 1]
+        agents = path.shape[1]
+        counts = np.zeros((agents, *shape), np.int64) if counts is None else counts
+        for a in range(agents):
+            cells = path[present[:, a], a]
+            np.add.at(counts[a], (cells[:, 0], cells[:, 1]), 1)
+    return counts
+
+
+def _visit_tint(counts: np.ndarray) -> np.ndarray:
+    """f[H, W, 3]: each cell in the colour of the agent that stood on it most, brighter the more often."""
+    owner, total = counts.argmax(axis=0), counts.sum(axis=0)
+    strength = np.log1p(total) / max(np.log1p(total.max()), 1e-9)
+    tint = np.asarray(AGENT_COLOURS)[owner] * np.where(total > 0, 0.2 + 0.6 * strength, 0.0)[..., None]
+    return np.where(total[..., None] > 0, tint, np.asarray(BACKGROUND) / 255)
+
+
+def draw_episodes(axis, world: HarvestMap, episodes) -> None:
+    """The map on a matplotlib ``axis``, each cell tinted by the agent that occupied it most.
+
+    The tint goes under the walls and apples, so the map itself stays readable; squares mark
+    the spawn corners and the legend gives each agent's mean return.
+
+    Args:
+        axis: a matplotlib axis.
+        world: one (unbatched) map.
+        episodes: ``evaluation.trajectories.Episodes`` replayed on it (positions i32[E, T+1, N, 2]).
+    """
+    from matplotlib.patches import Patch
+
+    walls, apples = np.asarray(world.walls, bool), np.asarray(world.apples, bool)
+    height, width = walls.shape
+    extent = (0, width, height, 0)
+    counts = visit_counts(episodes, (height, width))
+    axis.imshow(_visit_tint(counts), extent=extent, interpolation="nearest")
+    wall_layer = np.zeros((height, width, 4))
+    wall_layer[walls] = (*(np.asarray(WALL) / 255), 1.0)
+    axis.imshow(wall_layer, extent=extent, interpolation="nearest")
+    rows, cols = np.nonzero(apples)
+    axis.scatter(cols + 0.5, rows + 0.5, s=22, color=np.asarray(APPLE) / 255, edgecolors="black", linewidths=0.4, zorder=4)
+    for a, (row, col) in enumerate(spawn_corners(height, width)):
+        axis.scatter([col + 0.5], [row + 0.5], marker="s", s=60, color=AGENT_COLOURS[a], edgecolors="white", linewidths=1.2, zorder=5)
+    axis.set_xlim(0, width)
+    axis.set_ylim(height, 0)
+    returns = np.asarray(episodes.metrics.get("returns", np.zeros((len(episodes), counts.shape[0]))), np.float64)
+    handles = [Patch(color=AGENT_COLOURS[a], label=f"agent {a}: return {returns[:, a].mean():.1f}") for a in range(counts.shape[0])]
+    handles.append(Patch(color=np.asarray(APPLE) / 255, label="apple site"))
+    axis.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.02), ncol=3, fontsize=7, frameon=False)

@@ -110,3 +110,44 @@ def save_episode_gif(
     frames = [track_image(track, size, positions[: t + 1], positions[t], crashed and t == len(positions) - 1) for t in frames_at]
     save = lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)  # noqa: E731
     return write_atomically(out, save)
+
+
+def track_view(centreline: np.ndarray, extent: float = VIEW_EXTENT, margin: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+    """A square view (lower, upper corners) around the track: small tracks are drawn large."""
+    low, high = centreline.min(axis=0), centreline.max(axis=0)
+    centre, half = (low + high) / 2, max(high - low) / 2 + margin
+    half = min(half, extent)
+    centre = np.clip(centre, -extent + half, extent - half)
+    return centre - half, centre + half
+
+
+def draw_episodes(axis, world: Track, episodes) -> None:
+    """The track on a matplotlib ``axis`` with one path per episode and crash points marked.
+
+    Args:
+        axis: a matplotlib axis.
+        world: one (unbatched) track.
+        episodes: ``evaluation.trajectories.Episodes`` replayed on it (positions f32[E, T+1, 2]).
+    """
+    from matplotlib import colormaps
+
+    extent = (-VIEW_EXTENT, VIEW_EXTENT, -VIEW_EXTENT, VIEW_EXTENT)
+    axis.imshow(np.asarray(track_image(world, 480)), extent=extent, origin="upper", interpolation="bilinear")
+    colours, count = colormaps["plasma"], len(episodes)
+    for e in range(count):
+        path = episodes.path(e)
+        axis.plot(path[:, 0], path[:, 1], color=colours(0.1 + 0.75 * e / max(count - 1, 1)), linewidth=1.3, alpha=0.85)
+    crashed = [episodes.path(e)[-1] for e, ending in enumerate(episodes.endings()) if ending == "crash"]
+    if crashed:
+        points = np.array(crashed)
+        axis.scatter(
+            points[:, 0], points[:, 1], marker="X", s=110, color=(0.9, 0.1, 0.1), edgecolors="white", linewidths=1.2, zorder=5, label="crash"
+        )
+    centreline = np.asarray(world.centreline)
+    start, ahead = centreline[0], centreline[min(6, len(centreline) - 1)]
+    axis.scatter([start[0]], [start[1]], marker="o", s=45, color="white", edgecolors="black", zorder=6, label="start")
+    axis.annotate("", xy=tuple(ahead), xytext=tuple(start), arrowprops={"arrowstyle": "->", "color": "white", "linewidth": 1.5}, zorder=6)
+    axis.legend(loc="lower right", fontsize=7, framealpha=0.8)
+    lower, upper = track_view(centreline, VIEW_EXTENT)
+    axis.set_xlim(lower[0], upper[0])
+    axis.set_ylim(lower[1], upper[1])

@@ -1,0 +1,135 @@
+"""``worldagent generator train|show|report``: the world generator G(z), a VAE plus repair (paper §4.2)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from worldagent.commands.console import console, friendly_errors
+from worldagent.commands.options import env_argument
+from worldagent.errors import WorldagentError
+
+QUALITY_FILE = "quality.json"
+
+
+def repair_settings(texts: list[str]) -> dict:
+    """``--repair NAME=VALUE`` texts as a dict; values read as int, then float, else kept as text."""
+    settings = {}
+    for text in texts:
+        name, sep, value = text.partition("=")
+        if not sep or not name.strip():
+            raise WorldagentError(f"--repair {text!r}: write NAME=VALUE, e.g. --repair apples=40 (harvest).")
+        for kind in (int, float, str):
+            try:
+                settings[name.strip()] = kind(value.strip())
+                break
+            except ValueError:
+                continue
+    return settings
+
+
+def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed: int, config, repair: dict, progress: bool):
+    """Train the VAE (resuming a checkpoint in ``out``), save G(z); returns the trained VAE."""
+    from worldagent.worlds.dataset import WorldDataset, make_dataset
+    from worldagent.worlds.generator import build_generator, save_generator
+    from worldagent.worlds.vae import train_vae
+
+    if dataset_path is None:
+        dataset_path = out / "dataset.npz"
+        if not dataset_path.exists():
+            make_dataset(env, n, seed, progress=progress).save(dataset_path)
+    data = WorldDataset.load(dataset_path, env=env)
+    vae = train_vae(data, config, progress=progress, checkpoint_dir=out)
+    save_generator(out, vae, dataset_path, build_generator(vae, data, repair))
+    return vae
+
+
+def quality_figures(directory: Path, samples: int, seed: int) -> dict:
+    """Reconstruction, and the spec-driven figures of ``worlds.quality.figures``, of a saved generator."""
+    import jax
+
+    from worldagent.worlds.generator import load_generator
+    from worldagent.worlds.quality import figures, reconstruction
+    from worldagent.worlds.vae import split_holdout
+
+    if samples < 1:
+        raise WorldagentError(f"--samples {samples}; draw at least 1 latent.")
+    generator, vae, data = load_generator(directory)
+    train, held = split_holdout(len(data), vae.config.holdout, vae.config.seed)
+    return {
+        "env": data.env,
+        "worlds": len(data),
+        "reconstruction": reconstruction(generator, data, held, train),
+        data.env: figures(generator, data, samples, jax.random.key(seed)),
+        "training": {"epochs": len(vae.history), "final": vae.history[-1]},
+    }
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``worldagent generator`` and its subcommands."""
+    group = typer.Typer(help="Train, draw and assess the world generator G(z) (a VAE + repair).", no_args_is_help=True)
+    app.add_typer(group, name="generator")
+
+    @group.command("train")
+    @friendly_errors
+    def generator_train(
+        env: str = env_argument(),
+        out: Path = typer.Option(..., "--out", help="Generator directory (resumed if it holds an unfinished run)."),
+        dataset_path: Path = typer.Option(None, "--dataset", help="Dataset file; default: OUT/dataset.npz, made if missing."),
+        n: int = typer.Option(10_000, "--n", help="Worlds in a dataset made here."),
+        seed: int = typer.Option(0, "--seed", help="First generator seed of a dataset made here."),
+        epochs: int = typer.Option(25, "--epochs", help="Training epochs."),
+        beta: float = typer.Option(1.0, "--beta", help="Weight of the KL term of the ELBO."),
+        latent: int = typer.Option(10, "--latent", help="Latent dimensions (the paper: 10)."),
+        learning_rate: float = typer.Option(1e-3, "--lr", help="Adam step size."),
+        batch_size: int = typer.Option(128, "--batch-size", help="Worlds per minibatch."),
+        repair: list[str] = typer.Option([], "--repair", help="A setting of the env's repair NAME=VALUE, e.g. apples=40 (harvest; repeatable)."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
+    ) -> None:
+        """Train the VAE of G(z) on a dataset of worlds and save the generator (paper §4.2, Figure 3)."""
+        from worldagent.envs import registry
+        from worldagent.worlds.vae import VAEConfig
+
+        registry.get(env)  # an unknown environment fails before anything is written
+        settings = repair_settings(repair)
+        config = VAEConfig(latent_dim=latent, beta=beta, learning_rate=learning_rate, batch_size=batch_size, epochs=epochs)
+        config.validate()
+        vae = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet)
+        last = vae.history[-1]
+        console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}")
+
+    @group.command("show")
+    @friendly_errors
+    def generator_show(
+        directory: Path = typer.Argument(..., help="Generator directory (from `generator train`)."),
+        out: Path = typer.Option(None, "--out", help="Folder for traversals.png and reconstructions.png (default: the generator directory)."),
+        count: int = typer.Option(8, "--count", help="Held-out worlds to reconstruct."),
+    ) -> None:
+        """Draw latent traversals of G(z) and reconstructions of held-out worlds next to their originals."""
+        import numpy as np
+
+        from worldagent.worlds.generator import load_generator
+        from worldagent.worlds.pictures import reconstruction_sheet, traversal_sheet
+
+        generator, vae, data = load_generator(directory)
+        out = out or directory
+        indices = vae.holdout_indices[:count] if len(vae.holdout_indices) else np.arange(min(count, len(data)))
+        paths = [traversal_sheet(generator, out / "traversals.png"), reconstruction_sheet(generator, data, indices, out / "reconstructions.png")]
+        console.print("wrote " + ", ".join(str(p) for p in paths))
+
+    @group.command("report")
+    @friendly_errors
+    def generator_report(
+        directory: Path = typer.Argument(..., help="Generator directory (from `generator train`)."),
+        samples: int = typer.Option(10_000, "--samples", help="Draws z ~ N(0, I) for coverage / validity."),
+        seed: int = typer.Option(0, "--seed", help="Seed of those draws."),
+    ) -> None:
+        """Measure the generator: reconstruction, self-mapping, coverage, validity and diversity."""
+        import json
+
+        from worldagent.files import write_text
+
+        figures = quality_figures(directory, samples, seed)
+        write_text(directory / QUALITY_FILE, json.dumps(figures, indent=1))
+        typer.echo(json.dumps(figures, indent=1))

@@ -1,0 +1,60 @@
+"""``worldagent search ENV``: one campaign over the generator's latent space (paper §4.4)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from worldagent.commands.console import console, friendly_errors
+from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, env_argument, env_options, metric_help, option_flag
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``worldagent search``."""
+
+    @app.command()
+    @friendly_errors
+    def search(
+        env: str = env_argument(),
+        agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
+        generator: Path = typer.Option(..., "--generator", help=GENERATOR_HELP),
+        objective: str = typer.Option("reward", "--objective", help=metric_help()),
+        minimize: bool = typer.Option(False, "--minimize/--maximize", help="Direction of the search."),
+        optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes, bo or random."),
+        budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate (rounded up to whole CMA-ES generations)."),
+        repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the optimiser and of every episode."),
+        out: Path = typer.Option(Path("runs/search"), "--out", help="Run directory; its store.sqlite may hold many campaigns."),
+        name: str = typer.Option(None, "--name", help="Campaign name (default: optimiser-direction-objective-seed)."),
+        resume: bool = typer.Option(False, "--resume", help="Continue a killed campaign of the same name."),
+        option: list[str] = option_flag(),
+        greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    ) -> None:
+        """Search the generator's latent space for worlds that minimise or maximise an agent metric (paper §4.4)."""
+        import numpy as np
+
+        from worldagent import experiments
+        from worldagent.store import RunStore
+
+        setup = experiments.setup(env, agent, generator, options=env_options(env, option), greedy=greedy, repeats=repeats)
+        with RunStore(out) as store:
+            evaluations, spec = experiments.search(
+                store,
+                setup,
+                objective,
+                maximize=not minimize,
+                optimiser=optimiser,
+                budget=budget,
+                seed=seed,
+                name=name,
+                resume=resume,
+                progress=not quiet,
+            )
+        scores = np.array([e.score for e in evaluations])
+        best = evaluations[int(np.nanargmin(scores) if minimize else np.nanargmax(scores))]
+        console.print(
+            f"{spec.name}: {len(evaluations)} worlds; {spec.objective} mean {np.nanmean(scores):.4g}; {'min' if minimize else 'max'} {best.score:.4g} "
+            f"(generation {best.generation}, slot {best.slot}) -> {out / 'store.sqlite'}"
+        )

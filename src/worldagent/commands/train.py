@@ -1,0 +1,51 @@
+"""``worldagent train ENV``: train agents on a distribution of worlds (paper §4.3, §5.3)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from worldagent.commands.console import console, friendly_errors
+from worldagent.commands.options import algo_help, algorithm, env_argument, env_options, option_flag
+from worldagent.errors import WorldagentError
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``worldagent train``."""
+
+    @app.command()
+    @friendly_errors
+    def train(
+        env: str = env_argument(),
+        out: Path = typer.Option(..., "--out", help="Run directory: checkpoint, learning curve (CSV, PNG), the saved agent in OUT/policy."),
+        algo: str = typer.Option(None, "--algo", help=algo_help()),
+        episodes: int = typer.Option(None, "--episodes", help="Training episodes (default: the algorithm's budget for the env)."),
+        worlds: str = typer.Option(
+            "generator", "--worlds", help="Training worlds: generator (procedural), vae (G(z), needs --generator), or a dataset .npz."
+        ),
+        generator: Path = typer.Option(None, "--generator", help="Generator directory for --worlds vae."),
+        option: list[str] = option_flag(),
+        seed: int = typer.Option(0, "--seed", help="Seed of the run."),
+        resume: bool = typer.Option(True, "--resume/--restart", help="Continue from the run directory's checkpoint, or start over."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    ) -> None:
+        """Train agents on a distribution of worlds (paper §4.3, §5.3); a killed run resumes."""
+        from worldagent.agents.algorithms import training_config
+        from worldagent.agents.distributions import world_distribution
+        from worldagent.agents.training import train as run_training
+        from worldagent.envs import registry
+
+        spec = registry.get(env)
+        algo = algorithm(env, algo)
+        options = env_options(env, option)
+        if episodes is not None and episodes < 1:
+            raise WorldagentError(f"--episodes {episodes}; train for at least one episode.")
+        if worlds == "vae" and generator is None:
+            raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
+        config = training_config(spec, algo, episodes=episodes)
+        distribution = world_distribution(spec, worlds, generator_dir=generator, progress=not quiet)
+        result = run_training(
+            spec, algo, config, distribution, out, seed=seed, options=options, progress=not quiet, resume=resume, distribution_spec=worlds
+        )
+        console.print(f"trained {algo} for {result.episodes:,} episodes ({result.env_steps:,} steps, {result.wall_seconds:.0f} s) -> {out}")

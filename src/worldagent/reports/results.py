@@ -1,0 +1,221 @@
+"""The numbers of the report, recomputed from a run's stores (never copied from a phase's log).
+
+Normalisation (paper §6: "we normalise all reported metrics to be between 0 and 1") is the
+environment's (``spec.metrics.normalise``): by the main metric's rule-given range where the env
+registers ``bounds`` (racing), otherwise by the largest single-episode value of the main metric
+among all the run's evaluated worlds of that env (harvest; the best episode scores 1, a world's
+mean stays below).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from worldagent.envs import registry
+from worldagent.reproduce.layout import RunLayout
+from worldagent.reproduce.presets import PHASES
+
+
+@dataclass(frozen=True)
+class Headline:
+    """One headline number: ours (from the store) beside the paper's."""
+
+    key: str
+    label: str
+    ours: float | None
+    paper: float | None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Scale:
+    """How one run normalises an env's main metric: the env's params and the run's best episode."""
+
+    params: Any
+    best_episode: float | None
+
+
+def world_means(evaluations, metric: str) -> np.ndarray:
+    """f64[worlds]: each evaluated world's mean of ``metric`` over its episodes."""
+    return np.array([np.nanmean([np.nan if e.get(metric) is None else float(e[metric]) for e in ev.episodes]) for ev in evaluations], np.float64)
+
+
+def run_scale(spec, store) -> Scale:
+    """The params ``reproduce`` ran the env with, and the store's best single episode of the main metric."""
+    main = spec.metrics.main
+    best = max((float(e[main]) for ev in store.iter_evaluations() for e in ev.episodes if e.get(main) is not None), default=None)
+    return Scale(spec.make_env(spec.reproduce_options)[1], best)
+
+
+def normalised_means(spec, evaluations, scale: Scale) -> np.ndarray:
+    """f64[worlds]: each world's mean of its episodes' normalised main metric (``spec.metrics.normalise``)."""
+    main = spec.metrics.main
+    values = [[np.nan if e.get(main) is None else float(e[main]) for e in ev.episodes] for ev in evaluations]
+    return np.array([np.nanmean(spec.metrics.normalise(v, scale.params, scale.best_episode)) for v in values], np.float64)
+
+
+def best_evaluation(evaluations, maximize: bool):
+    """The lowest- (or highest-) scoring evaluation; the earliest on ties."""
+    finite = [e for e in evaluations if np.isfinite(e.score)]
+    if not finite:
+        return None
+    scores = np.array([e.score for e in finite])
+    return finite[int(np.argmax(scores) if maximize else np.argmin(scores))]
+
+
+def world_summary(spec, evaluation, scale: Scale) -> dict:
+    """Raw score, normalised score and the highlighted metrics (e.g. crash rate) of one evaluated world."""
+    return {
+        "raw": float(evaluation.score),
+        "normalised": float(normalised_means(spec, [evaluation], scale)[0]),
+        "campaign": evaluation.campaign,
+        "generation": evaluation.generation,
+        "slot": evaluation.slot,
+        **{name: float(world_means([evaluation], name)[0]) for name in spec.metrics.highlighted},
+    }
+
+
+def env_results(run_dir: Path, env: str, manifest: dict) -> dict:
+    """Everything the report shows about one environment, recomputed from the run store."""
+    from worldagent.store import RunStore
+
+    spec, layout = registry.get(env), RunLayout(Path(run_dir), env)
+    phases = manifest.get("phases", {})
+    done = {name: phases.get(f"{env}/{name}", {}) for name in PHASES}
+    results: dict[str, Any] = {"phases": done, "metric": spec.metrics.main, "layout": layout}
+    if layout.store_path.exists():
+        with RunStore(layout.store_path, create=False) as store:
+            results.update(store_results(spec, store, done))
+    if done["influence"].get("status") == "done" and layout.influence_result.is_file():
+        results["influence"] = json.loads(layout.influence_result.read_text())
+    if layout.quality_path.is_file():
+        results["quality"] = json.loads(layout.quality_path.read_text())
+    return results
+
+
+def random_results(spec, evaluations, campaign: str, scale: Scale) -> dict:
+    """Means over the random worlds: raw, normalised and each highlighted metric."""
+    normalised = normalised_means(spec, evaluations, scale)
+    return {
+        "campaign": campaign,
+        "worlds": len(evaluations),
+        "scores": np.array([e.score for e in evaluations]),
+        "normalised": normalised,
+        "mean_raw": float(np.nanmean([e.score for e in evaluations])),
+        "mean_normalised": float(np.nanmean(normalised)),
+        **{name: float(np.nanmean(world_means(evaluations, name))) for name in spec.metrics.highlighted},
+    }
+
+
+def store_results(spec, store, done: dict) -> dict:
+    """Random, strategic and comparison numbers of one environment's store."""
+    scale = run_scale(spec, store)
+    out: dict[str, Any] = {"scale": scale}
+    if done["random"].get("status") == "done":
+        campaign = done["random"]["outputs"]["campaign"]
+        out["random"] = random_results(spec, store.evaluations(campaign), campaign, scale)
+    if done["strategic"].get("status") == "done":
+        low_name, high_name = done["strategic"]["outputs"]["campaigns"]
+        for label, name, maximize in (("min", low_name, False), ("max", high_name, True)):
+            evaluations = store.evaluations(name)
+            found = best_evaluation(evaluations, maximize)
+            if found is not None:
+                out[label] = {**world_summary(spec, found, scale), "evaluated": len(evaluations)}
+    compare = done["compare"]
+    if compare.get("status") == "done" and "campaigns" in compare.get("outputs", {}) and "random" in out:
+        config = compare["config"]
+        budget = {opt: config.get("bo_budget", config["budget"]) if opt == "bo" else config["budget"] for opt in compare["outputs"]["campaigns"]}
+        runs = {
+            opt: [np.array([e.score for e in store.evaluations(name)[: budget[opt]]], np.float64) for name in names]
+            for opt, names in compare["outputs"]["campaigns"].items()
+        }
+        out["compare"] = {"runs": runs}
+    return out
+
+
+def pick(source: Any, *path) -> float | None:
+    """``source[path[0]][path[1]]...`` as a float, None when any step is missing."""
+    for step in path:
+        if not isinstance(source, dict) or step not in source:
+            return None
+        source = source[step]
+    return float(source) if source is not None else None
+
+
+def label(name: str) -> str:
+    return name.replace("_", " ")
+
+
+def headlines(results: dict[str, dict]) -> list[Headline]:
+    """The paper's headline numbers (§6.1–§6.2, ``spec.paper``) beside ours, for every environment of the run."""
+    rows: list[Headline] = []
+    for env, res in results.items():
+        spec = registry.get(env)
+        paper, main, title = spec.paper, spec.metrics.main, env.capitalize()
+        rows.append(
+            Headline(
+                f"{env}.random.mean_normalised",
+                f"{title}: random worlds, mean {label(main)} (normalised)",
+                pick(res, "random", "mean_normalised"),
+                paper.get("random.mean_normalised"),
+            )
+        )
+        rows.append(Headline(f"{env}.random.mean_raw", f"{title}: random worlds, mean {label(main)} (raw)", pick(res, "random", "mean_raw"), None))
+        rows += [
+            Headline(f"{env}.random.{m}", f"{title}: random worlds, {label(m)}", pick(res, "random", m), paper.get(f"random.{m}"))
+            for m in spec.metrics.highlighted
+        ]
+        for side in ("min", "max"):
+            world = f"{title}: {side}imising world"
+            rows.append(
+                Headline(
+                    f"{env}.{side}.normalised", f"{world}, {label(main)} (normalised)", pick(res, side, "normalised"), paper.get(f"{side}.normalised")
+                )
+            )
+            rows.append(Headline(f"{env}.{side}.raw", f"{world}, {label(main)} (raw)", pick(res, side, "raw"), None))
+            rows += [
+                Headline(f"{env}.{side}.{m}", f"{world}, {label(m)}", pick(res, side, m), paper.get(f"{side}.{m}")) for m in spec.metrics.highlighted
+            ]
+        rows += influence_headlines(env, res)
+    return rows
+
+
+def influence_headlines(env: str, res: dict) -> list[Headline]:
+    """Default and influenced means (over seeds) of the highlighted metrics, and the main metric's change in %."""
+    spec = registry.get(env)
+    summary = (res.get("influence") or {}).get("summary", {})
+    rows = [
+        Headline(
+            f"{env}.influence.{metric}_{which}",
+            f"{env.capitalize()} influence: {label(metric)}, {which} training",
+            pick(summary, metric, which, "mean"),
+            spec.paper.get(f"influence.{metric}.{which}"),
+        )
+        for metric in spec.metrics.highlighted
+        for which in ("default", "influenced")
+    ]
+    rows.append(
+        Headline(
+            f"{env}.influence.reward_change_pct",
+            f"{env.capitalize()} influence: reward change, % (normalised)",
+            reward_change(spec, res),
+            spec.paper.get("influence.reward_change_pct"),
+        )
+    )
+    return rows
+
+
+def reward_change(spec, res: dict) -> float | None:
+    """100 · (influenced − default) / |default| of the normalised main metric's means, None when unknown."""
+    main = (res.get("influence") or {}).get("summary", {}).get(spec.metrics.main, {})
+    before, after = pick(main, "default", "mean"), pick(main, "influenced", "mean")
+    scale = res.get("scale")
+    if before is None or after is None or scale is None:
+        return None
+    before, after = (float(spec.metrics.normalise(v, scale.params, scale.best_episode)) for v in (before, after))
+    return 100.0 * (after - before) / abs(before) if before and np.isfinite(before) and np.isfinite(after) else None

@@ -1,4 +1,4 @@
-"""The command line: help, the tracks sheet, and one-line errors for bad input."""
+"""The command line: help, the registry-driven commands, and one-line errors for bad input."""
 
 from __future__ import annotations
 
@@ -10,38 +10,71 @@ from worldagent.cli import app
 runner = CliRunner()
 
 
-def test_help_lists_the_commands():
+def one_line_error(result, message: str) -> bool:
+    """Exit code 2 and a single ``error:`` line holding ``message``."""
+    lines = result.output.strip().splitlines()
+    return result.exit_code == 2 and len(lines) == 1 and "error:" in lines[0] and message in result.output
+
+
+def test_help_lists_the_commands_and_the_registered_envs():
     result = runner.invoke(app, ["--help"])
     assert result.exit_code == 0
-    assert "tracks" in result.output
+    for command in ("worlds", "play", "envs", "train", "search", "reproduce"):
+        assert command in result.output
+    train_help = runner.invoke(app, ["train", "--help"])
+    assert "racing" in train_help.output and "harvest" in train_help.output
 
 
-def test_tracks_draws_a_sheet(tmp_path):
-    out = tmp_path / "sheet.png"
-    result = runner.invoke(app, ["tracks", "--n", "3", "--seed", "5", "--out", str(out)])
+def test_envs_lists_every_registered_environment():
+    result = runner.invoke(app, ["envs"])
     assert result.exit_code == 0, result.output
-    with Image.open(out) as image:
-        assert image.size[0] > 0
+    text = result.output
+    assert text.startswith("racing:") and "\nharvest:" in text
+    assert "main: return" in text and "crash_rate = crashed" in text and "ppo (default), acktr" in text and "driver, random" in text
+    assert "main: group_reward" in text and "dqn (default)" in text and "tagger" in text and "greedy" in text
 
 
-def test_negative_track_count_is_a_one_line_error(tmp_path):
-    result = runner.invoke(app, ["tracks", "--n", "-2", "--out", str(tmp_path / "x.png")])
-    assert result.exit_code == 2
-    assert "error:" in result.output and len(result.output.strip().splitlines()) == 1
+def test_worlds_draws_a_sheet_of_any_environment(tmp_path):
+    for env in ("racing", "harvest"):
+        out = tmp_path / f"{env}.png"
+        result = runner.invoke(app, ["worlds", env, "--n", "3", "--seed", "5", "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        with Image.open(out) as image:
+            assert image.size[0] > 0
+
+
+def test_worlds_refuses_bad_input_in_one_line(tmp_path):
+    assert one_line_error(runner.invoke(app, ["worlds", "racing", "--n", "-2", "--out", str(tmp_path / "x.png")]), "at least one world")
+    assert one_line_error(runner.invoke(app, ["worlds", "chess", "--out", str(tmp_path / "x.png")]), "unknown environment 'chess'")
     assert not (tmp_path / "x.png").exists()
 
 
-def test_drive_draws_an_episode_and_reports_its_metrics(tmp_path):
+def test_play_draws_episodes_and_reports_their_metrics(tmp_path):
     out = tmp_path / "episode.png"
-    result = runner.invoke(app, ["drive", "--seed", "3", "--out", str(out)])
+    result = runner.invoke(app, ["play", "racing", "--policy", "driver", "--seed", "3", "--out", str(out)])
     assert result.exit_code == 0, result.output
-    assert "lap True" in result.output and out.exists()
+    assert "return " in result.output and "episodes crashed" in result.output and out.exists()
 
 
-def test_drive_refuses_unknown_policies_and_formats(tmp_path):
-    for args, message in ((["--policy", "psychic"], "unknown policy"), (["--out", str(tmp_path / "e.mp4")], ".gif or .png")):
-        result = runner.invoke(app, ["drive", *args])
-        assert result.exit_code == 2 and message in result.output
+def test_play_refuses_unknown_policies_and_formats(tmp_path):
+    result = runner.invoke(app, ["play", "racing", "--policy", "driver", "--out", str(tmp_path / "e.gif")])
+    assert one_line_error(result, "use .png")
+    result = runner.invoke(app, ["play", "racing", "--policy", "psychic", "--out", str(tmp_path / "e.png")])
+    assert result.exit_code == 2 and "psychic" in result.output
+
+
+def test_option_errors_are_one_line(tmp_path):
+    common = ["--policy", "random", "--out", str(tmp_path / "e.png")]
+    cases = [
+        (["play", "racing", "--option", "tagger=0"], "racing has no option 'tagger'"),
+        (["play", "harvest", "--option", "speed=3"], "harvest has no option 'speed'; its options: tagger"),
+        (["play", "harvest", "--option", "tagger"], "write NAME=VALUE"),
+        (["play", "harvest", "--option", "tagger=x"], "not a list of agent indices"),
+        (["play", "harvest", "--option", "tagger=7"], "agents are numbered 0 to 3"),
+    ]
+    for args, message in cases:
+        assert one_line_error(runner.invoke(app, [*args, *common]), message), (args, message)
+    assert not (tmp_path / "e.png").exists()
 
 
 def test_dataset_and_generator_commands_end_to_end(tmp_path):
@@ -54,7 +87,8 @@ def test_dataset_and_generator_commands_end_to_end(tmp_path):
     assert runner.invoke(app, ["generator", "show", str(gen), "--count", "2"]).exit_code == 0
     assert (gen / "traversals.png").exists() and (gen / "reconstructions.png").exists()
     report = runner.invoke(app, ["generator", "report", str(gen), "--samples", "50"])
-    assert report.exit_code == 0 and '"validity_after_repair": 1.0' in report.output
+    assert report.exit_code == 0, report.output
+    assert '"harvest"' in report.output and (gen / "quality.json").exists()
     again = runner.invoke(app, args)  # finished run: resumes at its last epoch, trains nothing more
     assert again.exit_code == 0, again.output
 
@@ -64,6 +98,7 @@ def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):
         (["dataset", "chess", "--out", str(tmp_path / "x.npz")], "unknown environment"),
         (["generator", "report", str(tmp_path / "none")], "holds no generator"),
         (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--dataset", str(tmp_path / "missing.npz")], "does not exist"),
+        (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--repair", "apples"], "write NAME=VALUE"),
     ]
     for args, message in cases:
         result = runner.invoke(app, args)
@@ -93,16 +128,18 @@ def test_search_and_random_evaluation_commands(tmp_path, racing_vae, racing_data
 
 
 def test_train_commands_write_an_agent_that_search_can_load(tmp_path):
-    run = tmp_path / "ppo"
-    result = runner.invoke(app, ["train", "racing", "--algo", "ppo", "--episodes", "40", "--out", str(run), "--quiet"])
-    assert result.exit_code == 0, result.output
-    assert (run / "curve.csv").exists() and (run / "curve.png").exists() and (run / "policy" / "policy.json").exists()
-    result = runner.invoke(app, ["train", "harvest", "--episodes", "8", "--tagger", "0", "--out", str(tmp_path / "dqn"), "--quiet"])
-    assert result.exit_code == 0, result.output
-    from worldagent.commands.common import agent_policy as _agent
+    from worldagent.agents.loaders import load_agent
+    from worldagent.envs import registry
 
-    assert _agent("racing", str(run), greedy=False).params is not None
-    assert _agent("harvest", str(tmp_path / "dqn"), greedy=False).params is not None
+    run = tmp_path / "ppo"
+    result = runner.invoke(app, ["train", "racing", "--episodes", "40", "--out", str(run), "--quiet"])  # ppo: racing's default
+    assert result.exit_code == 0, result.output
+    assert "trained ppo" in result.output
+    assert (run / "curve.csv").exists() and (run / "curve.png").exists() and (run / "policy" / "policy.json").exists()
+    result = runner.invoke(app, ["train", "harvest", "--episodes", "8", "--option", "tagger=0", "--out", str(tmp_path / "dqn"), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert load_agent(registry.get("racing"), str(run)).params is not None
+    assert load_agent(registry.get("harvest"), str(tmp_path / "dqn")).params is not None
 
 
 def test_train_refuses_bad_requests_in_one_line(tmp_path):
@@ -110,6 +147,7 @@ def test_train_refuses_bad_requests_in_one_line(tmp_path):
         (["train", "racing", "--algo", "dqn"], "unknown algorithm 'dqn' for racing"),
         (["train", "racing", "--episodes", "0"], "at least one episode"),
         (["train", "harvest", "--worlds", "vae"], "--generator"),
+        (["train", "racing", "--option", "tagger=0"], "racing has no option 'tagger'"),
         (["train", "racing", "--worlds", str(tmp_path / "missing.npz")], "does not exist"),
     ]
     for args, message in cases:

@@ -7,7 +7,7 @@ import shutil
 import pytest
 
 from worldagent.reproduce.pipeline import reproduce
-from worldagent.reproduce.presets import TINY
+from worldagent.reproduce.presets import get_preset
 
 
 @pytest.fixture(scope="session")
@@ -15,7 +15,7 @@ def racing_run(tmp_path_factory):
     """(run directory, status lines) of the tiny preset run end to end on racing."""
     out = tmp_path_factory.mktemp("reproduce") / "tiny"
     lines: list[str] = []
-    reproduce(TINY, out, ["racing"], progress=False, echo=lines.append)
+    reproduce(get_preset("tiny"), out, ["racing"], progress=False, echo=lines.append)
     return out, lines
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from dataclasses import replace
 
 import pytest
 
@@ -13,7 +12,9 @@ from worldagent.reproduce import phases as phases_module
 from worldagent.reproduce.manifest import Manifest
 from worldagent.reproduce.phases import EnvContext
 from worldagent.reproduce.pipeline import forget_phases, reproduce
-from worldagent.reproduce.presets import PHASES, TINY
+from worldagent.reproduce.presets import PHASES, get_preset
+
+TINY = get_preset("tiny")
 
 
 def rows(store_path) -> dict[str, int]:
@@ -54,8 +55,8 @@ def test_every_phase_runs_and_is_recorded(racing_run):
     ):
         assert (out / path).is_file(), path
     campaigns = rows(out / "racing" / "store.sqlite")
-    assert campaigns["random-return-s0"] == TINY.racing.random_worlds
-    assert campaigns["cmaes-min-return-s0"] >= TINY.racing.strategic_budget and "cmaes-max-return-s0" in campaigns
+    assert campaigns["random-return-s0"] == TINY.budgets("racing").random_worlds
+    assert campaigns["cmaes-min-return-s0"] >= TINY.budgets("racing").strategic_budget and "cmaes-max-return-s0" in campaigns
     assert {"compare-cmaes-min-return-s0", "compare-bo-min-return-s0", "compare-random-min-return-s0"} <= set(campaigns)
     assert sum(line.endswith("running") for line in lines) == len(PHASES) + 1  # one status line per phase, then its result
 
@@ -98,7 +99,7 @@ def test_a_killed_run_resumes_where_it_stopped(racing_copy, monkeypatch):
 
 
 def test_a_changed_config_is_refused_with_the_fix(racing_copy):
-    changed = replace(TINY, racing=replace(TINY.racing, random_worlds=50))
+    changed = TINY.with_budgets("racing", random_worlds=50)
     with pytest.raises(WorldagentError, match=r"phase racing/random was run with another config \(worlds 42 -> 50\); rerun with --restart random"):
         reproduce(changed, racing_copy, ["racing"], progress=False, echo=lambda line: None)
     with pytest.raises(WorldagentError, match="--restart agent"):

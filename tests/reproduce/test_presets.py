@@ -1,51 +1,80 @@
-"""Presets: printable, validated, and sliced per phase (what a resumed run compares)."""
+"""Presets: built from the specs, printable, validated, and sliced per phase (what a resumed run compares)."""
 
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import pytest
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.phases import dependents
 from worldagent.reproduce.pipeline import resolve_envs, restart_closure
-from worldagent.reproduce.presets import PAPER, PHASES, PRESETS, QUICK, TINY, get_preset
+from worldagent.reproduce.presets import PHASES, SETTINGS, EnvBudgets, get_preset
+
+PAPER, QUICK, TINY = (get_preset(name) for name in ("paper", "quick", "tiny"))
 
 
 def test_paper_preset_has_the_papers_budgets():
-    assert PAPER.racing.worlds == PAPER.harvest.worlds == 10_000
-    assert (PAPER.racing.episodes, PAPER.harvest.episodes) == (10_000, 5_000)
-    assert PAPER.repeats == 8 and PAPER.racing.random_worlds == PAPER.harvest.random_worlds == 1_000
-    assert PAPER.vae_hidden == (1024, 512) and PAPER.racing_algo == "ppo"  # ACKTR lapped for 1 seed of 3 (see Preset)
+    racing, harvest = PAPER.budgets("racing"), PAPER.budgets("harvest")
+    assert racing.worlds == harvest.worlds == 10_000
+    assert (racing.episodes, harvest.episodes) == (10_000, 5_000)
+    assert PAPER.repeats == 8 and racing.random_worlds == harvest.random_worlds == 1_000
+    assert PAPER.vae_hidden == (1024, 512)
+    assert (PAPER.algo_of("racing"), PAPER.algo_of("harvest")) == ("ppo", "dqn")  # each env's default algorithm
 
 
-@pytest.mark.parametrize("preset", list(PRESETS.values()), ids=list(PRESETS))
-def test_presets_print_as_json_and_slice_every_phase(preset):
+def test_budgets_come_from_the_specs():
+    for name in SETTINGS:
+        preset = get_preset(name)
+        assert list(preset.envs) == [env for env in registry.names() if name in registry.get(env).presets]
+        for env, budgets in preset.envs.items():
+            assert budgets == EnvBudgets(**registry.get(env).presets[name])
+
+
+def test_options_and_selections_come_from_the_specs():
+    assert TINY.phase_config("harvest", "agent")["options"] == {"tagger": [0]}  # harvest's reproduce_options
+    assert "options" not in TINY.phase_config("racing", "agent")
+    assert TINY.selection("harvest") == registry.get("harvest").selection == "conflict == 0"
+    assert QUICK.selection("racing") == "crash_rate > 0"  # the racing budgets override the paper's selection
+    assert TINY.selection("racing") == registry.get("racing").selection
+
+
+@pytest.mark.parametrize("name", list(SETTINGS))
+def test_presets_print_as_json_and_slice_every_phase(name):
+    preset = get_preset(name)
     shown = json.loads(preset.show())
-    assert shown["name"] == preset.name and shown["racing"]["worlds"] == preset.racing.worlds
-    for env in ("racing", "harvest"):
+    assert shown["name"] == name and shown["envs"]["racing"]["worlds"] == preset.budgets("racing").worlds
+    for env in preset.envs:
         for phase in PHASES:
             assert preset.phase_config(env, phase)["seed"] == preset.seed
 
 
 def test_a_budget_change_touches_only_its_phase():
-    changed = replace(QUICK, racing=replace(QUICK.racing, random_worlds=7))
+    changed = QUICK.with_budgets("racing", random_worlds=7)
     differ = [p for p in PHASES if changed.phase_config("racing", p) != QUICK.phase_config("racing", p)]
     assert differ == ["random"]
     assert changed.phase_config("harvest", "random") == QUICK.phase_config("harvest", "random")
 
 
+def test_algo_overrides_only_the_envs_that_have_it():
+    acktr = TINY.with_algo("acktr")
+    assert (acktr.algo_of("racing"), acktr.algo_of("harvest")) == ("acktr", "dqn")
+    assert acktr.phase_config("racing", "agent")["algo"] == "acktr" and acktr.phase_config("harvest", "agent") == TINY.phase_config(
+        "harvest", "agent"
+    )
+
+
 def test_bad_names_and_budgets_are_refused_in_one_line():
     with pytest.raises(WorldagentError, match="unknown preset 'huge'; use one of: tiny, quick, paper"):
         get_preset("huge")
-    with pytest.raises(WorldagentError, match="racing algorithm 'dqn'"):
-        TINY.with_algo("dqn")
+    with pytest.raises(WorldagentError, match="algorithm 'sarsa' trains none of racing, harvest"):
+        TINY.with_algo("sarsa")
     with pytest.raises(WorldagentError, match="episodes"):
-        replace(TINY, racing=replace(TINY.racing, episodes=0))
-    with pytest.raises(WorldagentError, match="use racing, harvest or all"):
-        resolve_envs("chess")
-    assert TINY.with_algo("ppo").phase_config("racing", "agent")["algo"] == "ppo"
+        TINY.with_budgets("racing", episodes=0)
+    with pytest.raises(WorldagentError, match="unknown environment 'chess'"):
+        resolve_envs("chess", TINY)
+    assert resolve_envs("all", TINY) == ["racing", "harvest"] and resolve_envs("harvest", TINY) == ["harvest"]
 
 
 def test_restarting_a_phase_restarts_what_is_computed_from_it():

@@ -10,6 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from worldagent.cli import app
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reports.html import SECTIONS, build_report
 from worldagent.reproduce.manifest import Manifest
@@ -31,6 +32,12 @@ def episode_mean(evaluation, metric: str) -> float:
     return float(np.mean([float(e[metric]) for e in evaluation.episodes]))
 
 
+def normalised_mean(evaluation) -> float:
+    """A racing world's mean normalised return: ``spec.metrics.normalise`` of each episode's return (paper §6)."""
+    spec = registry.get("racing")
+    return float(np.mean(spec.metrics.normalise([e["return"] for e in evaluation.episodes], spec.make_env()[1])))
+
+
 def expected_racing(out) -> dict[str, float]:
     """The racing headline numbers, recomputed here straight from the store and influence.json."""
     with RunStore(out / "racing" / "store.sqlite", create=False) as store:
@@ -39,21 +46,22 @@ def expected_racing(out) -> dict[str, float]:
         high = max(store.evaluations("cmaes-max-return-s0"), key=lambda e: e.score)
     values = {
         "racing.random.mean_raw": np.mean([e.score for e in random]),
-        "racing.random.mean_normalised": np.mean([episode_mean(e, "normalised_return") for e in random]),
-        "racing.random.crash_rate": np.mean([episode_mean(e, "crashed") for e in random]),
+        "racing.random.mean_normalised": np.mean([normalised_mean(e) for e in random]),
+        "racing.random.crashed": np.mean([episode_mean(e, "crashed") for e in random]),
     }
     for label, found in (("min", low), ("max", high)):
         values.update(
             {
                 f"racing.{label}.raw": found.score,
-                f"racing.{label}.normalised": episode_mean(found, "normalised_return"),
-                f"racing.{label}.crash_rate": episode_mean(found, "crashed"),
+                f"racing.{label}.normalised": normalised_mean(found),
+                f"racing.{label}.crashed": episode_mean(found, "crashed"),
             }
         )
     summary = json.loads((out / "racing" / "influence" / "influence.json").read_text())["summary"]
     for which in ("default", "influenced"):
         values[f"racing.influence.crashed_{which}"] = summary["crashed"][which]["mean"]
-    before, after = summary["normalised_return"]["default"]["mean"], summary["normalised_return"]["influenced"]["mean"]
+    spec = registry.get("racing")
+    before, after = (float(spec.metrics.normalise(summary["return"][which]["mean"], spec.make_env()[1])) for which in ("default", "influenced"))
     values["racing.influence.reward_change_pct"] = 100 * (after - before) / abs(before)
     return values
 
@@ -67,7 +75,7 @@ def test_the_report_is_one_self_contained_file_with_every_section(racing_run):
     assert len(images) >= 6 and all(src.startswith("data:image/png;base64,") for src in images)
     assert not re.search(r'(src|href)="(?!data:|#)', page)  # nothing to fetch: it opens offline
     assert "<table>" in page and "worlds to reach random q0.1" in page
-    for number in ("0.87", "0.13", "0.99", "0.61", "0.05", "0.92", "0.11", "0.04", "0.51", "0.33", "0.78", "-5"):
+    for number in ("0.87", "0.13", "0.99", "0", "0.11", "0.04", "-5"):  # racing's spec.paper
         assert f"<td class='num'>{number}</td>" in page, number  # the paper's values, beside ours
 
 
@@ -76,7 +84,7 @@ def test_the_reports_numbers_equal_the_stores(racing_run):
     shown = data_values((out / "report.html").read_text())
     for key, value in expected_racing(out).items():
         assert np.isclose(shown[key], value, rtol=1e-12, atol=1e-12, equal_nan=True), key
-    assert np.isnan(shown["harvest.random.mean_normalised"])  # harvest was not run: n/a, not a crash
+    assert not any(key.startswith("harvest.") for key in shown)  # harvest was not run: no section of its own
 
 
 def test_the_report_shows_its_sample_efficiency_table_from_the_store(racing_run):
@@ -131,27 +139,32 @@ def fake_evaluation(campaign: str, score: float, episodes: list[dict]):
 
 
 def test_harvest_reward_is_normalised_by_the_runs_best_episode():
-    from worldagent.reports.html import headlines, normalised_means, world_summary
+    from worldagent.envs import registry
+    from worldagent.reports.results import Scale, headlines, normalised_means, world_summary
 
+    spec = registry.get("harvest")
     worlds = [
         fake_evaluation(
             "random", 60.0, [{"group_reward": 40.0, "conflict": 0.5, "equality": 0.25}, {"group_reward": 80.0, "conflict": 0.0, "equality": 0.75}]
         ),
         fake_evaluation("random", 200.0, [{"group_reward": 200.0, "conflict": 0.0, "equality": 1.0}]),
     ]
-    assert np.allclose(normalised_means("harvest", worlds, 200.0), [0.3, 1.0])
-    low = world_summary("harvest", worlds[0], 200.0)
+    scale = Scale(spec.make_env()[1], 200.0)
+    assert np.allclose(normalised_means(spec, worlds, scale), [0.3, 1.0])
+    low = world_summary(spec, worlds[0], scale)
     assert (low["raw"], low["normalised"], low["conflict"], low["equality"]) == (60.0, 0.3, 0.25, 0.5)
     influence = {
         "summary": {
+            "group_reward": {"default": {"mean": 100.0}, "influenced": {"mean": 90.0}},
             "conflict": {"default": {"mean": 0.5}, "influenced": {"mean": 0.1}},
             "equality": {"default": {"mean": 0.3}, "influenced": {"mean": 0.8}},
         }
     }
-    rows = {
-        row.key: row for row in headlines({"harvest": {"random": {"mean_normalised": 0.65, "mean_raw": 130.0}, "min": low, "influence": influence}})
-    }
+    results = {"harvest": {"random": {"mean_normalised": 0.65, "mean_raw": 130.0}, "min": low, "influence": influence, "scale": scale}}
+    rows = {row.key: row for row in headlines(results)}
     assert rows["harvest.random.mean_normalised"].ours == 0.65 and rows["harvest.random.mean_normalised"].paper == 0.61
     assert rows["harvest.min.normalised"].ours == 0.3 and rows["harvest.max.normalised"].ours is None
     assert (rows["harvest.influence.conflict_default"].ours, rows["harvest.influence.equality_influenced"].ours) == (0.5, 0.8)
-    assert rows["racing.random.mean_normalised"].ours is None  # racing not run: n/a
+    assert rows["harvest.influence.conflict_default"].paper == 0.51
+    assert np.isclose(rows["harvest.influence.reward_change_pct"].ours, -10.0)
+    assert not any(key.startswith("racing.") for key in rows)  # racing not run: no rows

@@ -71,7 +71,7 @@ def influence_command(
     from rich.console import Console
 
     from worldagent import experiments
-    from worldagent.reports.influence import influence_examples, influence_figure
+    from worldagent.reports.influence import influence_figure
 
     setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, repeats=repeats)
     result = experiments.influence(
@@ -88,7 +88,7 @@ def influence_command(
         greedy=greedy,
         progress=not quiet,
     )
-    figure = influence_figure(result, influence_examples(out, setup.spec), setup.spec, out / "influence.png")
+    figure = influence_figure(result, experiments.example_worlds(out, setup.spec), setup.spec, out / "influence.png")
     Console().print(result_table(result))
     counts = result["worlds"]
     console.print(

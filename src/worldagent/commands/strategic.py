@@ -15,14 +15,6 @@ from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, check_counts
 from worldagent.errors import WorldagentError
 
 
-def episode_note(spec, evaluation) -> str:
-    """What the env says about how a world's episodes ended (``spec.episode_note``), e.g. ", 8/8 episodes crashed"."""
-    if spec.episode_note is None or not evaluation.episodes:
-        return ""
-    names = {name for episode in evaluation.episodes for name in episode}
-    return spec.episode_note({name: [episode.get(name) for episode in evaluation.episodes] for name in names})
-
-
 def optimiser_names(text: str) -> tuple[str, ...]:
     """``"cmaes,bo"`` -> ("cmaes", "bo"); unknown or repeated names are refused."""
     from worldagent.search.optimisers import OPTIMISERS
@@ -83,7 +75,7 @@ def register(app: typer.Typer) -> None:
             key=found.get("keys"),
         )
         console.print(
-            f"{env} {metric}: min {low.score:.4g}{episode_note(setup.spec, low)}; max {high.score:.4g}{episode_note(setup.spec, high)}; "
+            f"{env} {metric}: min {low.score:.4g}{experiments.episode_note(setup.spec, low)}; max {high.score:.4g}{experiments.episode_note(setup.spec, high)}; "
             f"random mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g}, {len(scores)} worlds) -> {figure}"
         )
 

@@ -44,16 +44,6 @@ def world_image(spec: str | EnvSpec, world: Any, size: int = 192) -> np.ndarray:
     return np.asarray(registry.get(spec).pictures.world(world, size).convert("RGB"))
 
 
-def influence_examples(run_dir: Path | str, spec: str | EnvSpec, count: int = MAX_EXAMPLES) -> Any:
-    """Up to ``count`` worlds of an influencing run's new training distribution (batched), for the figure."""
-    from worldagent.influence.cache import load_influenced_worlds
-    from worldagent.influence.worlds import example_indices
-
-    worlds, _, values = load_influenced_worlds(run_dir, registry.get(spec))
-    picks = np.asarray(example_indices(values, count))
-    return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[picks], worlds)
-
-
 def _interval(entry: dict) -> float:
     """The CI half-width; NaN (no error bar drawn) when unknown (one seed: NaN in memory, null in JSON)."""
     value = entry.get("ci95")

@@ -234,7 +234,7 @@ def random_scores(ctx: EnvContext) -> np.ndarray:
     from worldagent import experiments
 
     with ctx.store() as store:
-        return np.array([e.score for e in store.evaluations(experiments.campaign_names(ctx.metric, ctx.seed)["random"])])
+        return experiments.random_scores(store, ctx.metric, ctx.seed)
 
 
 def strategic_phase(ctx: EnvContext) -> dict:
@@ -274,7 +274,7 @@ def compare_names(ctx: EnvContext, optimisers=OPTIMISERS) -> dict[str, list[str]
     """Store names of the comparison campaigns, by optimiser."""
     from worldagent import experiments
 
-    return {opt: [experiments.comparison_campaign_name(opt, False, ctx.metric, s) for s in ctx.budgets.compare_seeds] for opt in optimisers}
+    return experiments.comparison_campaign_names(ctx.metric, ctx.budgets.compare_seeds, optimisers)
 
 
 def compare_phase(ctx: EnvContext) -> dict:
@@ -315,7 +315,7 @@ def compare_phase(ctx: EnvContext) -> dict:
 def influence_phase(ctx: EnvContext) -> dict:
     """Retrain agents on worlds with a desired property and compare them with default training (§6.2, Figure 8)."""
     from worldagent import experiments
-    from worldagent.reports.influence import influence_examples, influence_figure
+    from worldagent.reports.influence import influence_figure
 
     budgets, layout = ctx.budgets, ctx.layout
     setup = ctx.setup()
@@ -333,7 +333,7 @@ def influence_phase(ctx: EnvContext) -> dict:
         seed=ctx.seed,
         progress=ctx.progress,
     )
-    examples = influence_examples(layout.influence_dir, setup.spec)
+    examples = experiments.example_worlds(layout.influence_dir, setup.spec)
     figure = influence_figure(result, examples, setup.spec, layout.figure("influence"))
     return {
         "influence": layout.rel(layout.influence_result),

@@ -48,9 +48,9 @@ def test_observation_picture_and_episode_gif(env, reset_fn, step_fn, quiet_param
         assert 1 < gif.n_frames <= 4  # Pillow merges identical consecutive frames
 
 
-def test_maps_command_draws_a_sheet(tmp_path, generated_maps):
+def test_worlds_command_draws_a_sheet_of_maps(tmp_path, generated_maps):
     out = tmp_path / "maps.png"
-    result = runner.invoke(app, ["maps", "--n", "4", "--seed", "0", "--out", str(out)])
+    result = runner.invoke(app, ["worlds", "harvest", "--n", "4", "--seed", "0", "--out", str(out)])
     assert result.exit_code == 0, result.output
     with Image.open(out) as image:
         sheet = np.asarray(image.convert("RGB"))
@@ -59,8 +59,31 @@ def test_maps_command_draws_a_sheet(tmp_path, generated_maps):
     np.testing.assert_array_equal(sheet[4 : 4 + 200, 4 : 4 + 200], first)  # seed 0 in the top-left tile
 
 
-def test_maps_command_bad_count_is_one_line(tmp_path):
-    result = runner.invoke(app, ["maps", "--n", "0", "--out", str(tmp_path / "x.png")])
+def test_worlds_command_bad_count_is_one_line(tmp_path):
+    result = runner.invoke(app, ["worlds", "harvest", "--n", "0", "--out", str(tmp_path / "x.png")])
     assert result.exit_code == 2
     assert "error:" in result.output and len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "x.png").exists()
+
+
+def test_draw_episodes_tints_the_cells_each_agent_visited(generated_maps):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from worldagent.agents.loaders import load_agent
+    from worldagent.envs import registry
+    from worldagent.evaluation.trajectories import replay, scored_keys
+
+    spec = registry.get("harvest")
+    env, params = spec.make_env()
+    world = index_maps(generated_maps, 0)
+    episodes = replay(env, load_agent(spec, "random"), world, scored_keys(3, 2), params, num_steps=20)
+    counts = render.visit_counts(episodes, (25, 25))
+    assert counts.shape == (4, 25, 25)
+    np.testing.assert_array_equal(counts.sum(axis=(1, 2)), episodes.present.sum(axis=(0, 1)))  # one count per agent-step on the map
+    figure, axis = plt.subplots()
+    render.draw_episodes(axis, world, episodes)
+    assert len(axis.images) == 2 and axis.get_legend() is not None
+    plt.close(figure)

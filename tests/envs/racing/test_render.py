@@ -39,3 +39,23 @@ def test_sheet_and_gif_are_written(tmp_path, tracks, track):
     gif = save_episode_gif(track, np.asarray(track.centreline[:30]), tmp_path / "episode.gif", size=64)
     with Image.open(gif) as image:
         assert image.n_frames == 16  # every 2nd of 30 steps, plus the last
+
+
+def test_draw_episodes_marks_paths_and_crashes(track):
+    import jax
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from worldagent.envs.racing.render import draw_episodes, track_view
+    from worldagent.evaluation.trajectories import Episodes
+
+    path = np.asarray(track.centreline[:5], np.float32)
+    episodes = Episodes(path[None], np.ones((1, 5), bool), np.array([4]), {"crashed": np.array([True]), "lap_completed": np.array([False])})
+    figure, axis = plt.subplots()
+    draw_episodes(axis, jax.tree_util.tree_map(np.asarray, track), episodes)
+    assert len(axis.lines) == 1 and "crash" in [t.get_text() for t in axis.get_legend().get_texts()]
+    lower, upper = track_view(np.asarray(track.centreline))
+    assert np.all(lower >= -VIEW_EXTENT) and np.all(upper <= VIEW_EXTENT)
+    plt.close(figure)

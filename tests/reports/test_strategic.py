@@ -35,8 +35,8 @@ def test_racing_figure_with_the_scored_episodes(tmp_path, racing_generator):
     assert out.stat().st_size > 20_000
     with Image.open(out) as image:
         assert image.format == "PNG" and image.size[0] > 2 * image.size[1]
-    episodes = replay(env, policy, spec.world_from_arrays(low.world), keys[0])
-    assert ending_summary(episodes).startswith("2 episodes: ")
+    episodes = replay(spec, env, policy, spec.world_from_arrays(low.world), keys[0])
+    assert ending_summary(spec, episodes).startswith("2 episodes (steps ") and "episodes crashed" in ending_summary(spec, episodes)
 
 
 def test_harvest_figure(tmp_path, harvest_generator):

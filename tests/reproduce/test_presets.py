@@ -33,7 +33,7 @@ def test_budgets_come_from_the_specs():
 
 
 def test_options_and_selections_come_from_the_specs():
-    assert TINY.phase_config("harvest", "agent")["options"] == {"tagger": [0]}  # harvest's reproduce_options
+    assert TINY.phase_config("harvest", "agent")["options"] == {"tagger": (0,)}  # harvest's reproduce_options
     assert "options" not in TINY.phase_config("racing", "agent")
     assert TINY.selection("harvest") == registry.get("harvest").selection == "conflict == 0"
     assert QUICK.selection("racing") == "crash_rate > 0"  # the racing budgets override the paper's selection

@@ -37,7 +37,7 @@ def play_episodes(env: str, agent: str, seed: int, key: int, episodes: int, out:
     env_obj, params = spec.make_env(parsed)
     policy = load_agent(spec, agent, greedy=greedy, options=parsed)
     world = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[0], spec.generate(np.array([seed], np.int64)))
-    played = replay(env_obj, policy, world, jax.random.split(jax.random.key(key), episodes), params)
+    played = replay(spec, env_obj, policy, world, jax.random.split(jax.random.key(key), episodes), params)
     plt = _pyplot()
     figure, axis = plt.subplots(figsize=(6, 6.4), dpi=120)
     spec.pictures.episodes(axis, world, played)

@@ -45,22 +45,18 @@ def drawn_scores(spec: EnvSpec, episodes: Episodes, metric: str, params: Any) ->
     return np.asarray(metrics[metric][0], np.float64)
 
 
-def ending_summary(episodes: Episodes) -> str:
-    """ "8 episodes: 6 crashed (steps 41–57), 2 lapped" — how racing episodes ended."""
-    endings = np.array(episodes.endings())
-    parts = []
-    for kind, verb in (("crash", "crashed"), ("lap", "lapped"), ("timeout", "timed out")):
-        steps = episodes.steps[endings == kind]
-        if len(steps):
-            span = f"{steps.min()}" if steps.min() == steps.max() else f"{steps.min()}–{steps.max()}"
-            parts.append(f"{len(steps)} {verb} (step {span})")
-    return f"{len(episodes)} episodes: " + ", ".join(parts)
+def ending_summary(spec: EnvSpec, episodes: Episodes) -> str:
+    """ "8 episodes (steps 41–400), 6/8 episodes crashed": their lengths and what the env says of them."""
+    steps = np.asarray(episodes.steps)
+    span = f"{steps.min()}" if steps.min() == steps.max() else f"{steps.min()}–{steps.max()}"
+    note = spec.episode_note({k: np.asarray(v) for k, v in episodes.metrics.items()}) if spec.episode_note else ""
+    return f"{len(episodes)} episode{'s' if len(episodes) != 1 else ''} (steps {span}){note}"
 
 
 def _world_panel(axis, spec: EnvSpec, env, policy, params, evaluation: Evaluation, keys, metric: str, label: str) -> Episodes:
     """Replay and draw one world (``spec.pictures.episodes``); the title gives the stored score and what was drawn."""
     world = spec.world_from_arrays(evaluation.world)
-    episodes = replay(env, policy, world, keys, params)
+    episodes = replay(spec, env, policy, world, keys, params)
     drawn = drawn_scores(spec, episodes, metric, params)
     if spec.pictures.episodes is None:
         axis.imshow(np.asarray(spec.pictures.world(world, 480)), interpolation="nearest")
@@ -69,7 +65,7 @@ def _world_panel(axis, spec: EnvSpec, env, policy, params, evaluation: Evaluatio
     scored = np.isclose(drawn.mean(), evaluation.score, rtol=1e-4, atol=1e-3) and len(drawn) == len(evaluation.episodes)
     drawn_note = "the scored episodes" if scored else f"fresh episodes, mean {drawn.mean():.4g}"
     extra = _normalised_note(spec, metric, evaluation, params)
-    axis.set_title(f"{label} {metric}: {evaluation.score:.4g}{extra}\n{ending_summary(episodes)}\n(drawn: {drawn_note})", fontsize=9)
+    axis.set_title(f"{label} {metric}: {evaluation.score:.4g}{extra}\n{ending_summary(spec, episodes)}\n(drawn: {drawn_note})", fontsize=9)
     axis.set_xticks([])
     axis.set_yticks([])
     return episodes

@@ -79,7 +79,7 @@ def test_draw_episodes_tints_the_cells_each_agent_visited(generated_maps):
     spec = registry.get("harvest")
     env, params = spec.make_env()
     world = index_maps(generated_maps, 0)
-    episodes = replay(env, load_agent(spec, "random"), world, scored_keys(3, 2), params, num_steps=20)
+    episodes = replay(spec, env, load_agent(spec, "random"), world, scored_keys(3, 2), params, num_steps=20)
     counts = render.visit_counts(episodes, (25, 25))
     assert counts.shape == (4, 25, 25)
     np.testing.assert_array_equal(counts.sum(axis=(1, 2)), episodes.present.sum(axis=(0, 1)))  # one count per agent-step on the map

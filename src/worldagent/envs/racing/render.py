@@ -137,7 +137,8 @@ def draw_episodes(axis, world: Track, episodes) -> None:
     for e in range(count):
         path = episodes.path(e)
         axis.plot(path[:, 0], path[:, 1], color=colours(0.1 + 0.75 * e / max(count - 1, 1)), linewidth=1.3, alpha=0.85)
-    crashed = [episodes.path(e)[-1] for e, ending in enumerate(episodes.endings()) if ending == "crash"]
+    crashes = np.asarray(episodes.metrics.get("crashed", np.zeros(count)), bool)
+    crashed = [episodes.path(e)[-1] for e in range(count) if crashes[e]]
     if crashed:
         points = np.array(crashed)
         axis.scatter(

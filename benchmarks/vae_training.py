@@ -17,6 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import record  # noqa: E402
+from worldagent.envs import registry  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator, save_generator  # noqa: E402
 from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
@@ -24,7 +25,7 @@ from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--env", choices=["racing", "harvest"], required=True)
+    parser.add_argument("--env", choices=registry.names(), required=True)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--num-worlds", type=int, default=10_000)
     args = parser.parse_args()

@@ -112,7 +112,7 @@ def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_g
     racing = figures(racing_generator, racing_data, 500, jax.random.key(0))
     assert racing["self_mapping_rate"] > 5 / len(racing_data)  # far above chance
     assert 1 < racing["coverage_distinct_worlds"] == racing["distinct_layouts"] <= len(racing_data)
-    assert racing["coverage_fraction"] == racing["coverage_distinct_worlds"] / len(racing_data)
+    assert racing["coverage_fraction"] == racing["coverage_distinct_worlds"] / len(racing_data)  # racing only returns dataset worlds
     assert racing["validity_after_repair"] == 1.0 and "validity_before_repair" not in racing  # racing has no raw decode
     assert 1 / 500 <= racing["most_reached_share"] <= 1.0 and racing["samples"] == 500
     harvest = figures(harvest_generator, harvest_data, 200, jax.random.key(0))
@@ -120,6 +120,7 @@ def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_g
     assert 0.0 <= harvest["validity_before_repair"] <= 1.0
     assert 0.0 <= harvest["self_mapping_rate"] <= 1.0
     assert harvest["distinct_layouts"] >= 1 and harvest["mean_cell_hamming"] >= 0.0
+    assert 0.0 <= harvest["coverage_fraction"] <= 1.0
     with pytest.raises(WorldagentError, match="at least 1"):
         figures(harvest_generator, harvest_data, 0, jax.random.key(0))
 

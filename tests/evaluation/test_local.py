@@ -7,7 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from worldagent.agents.policy import CallablePolicy, Policy, harvest_random_policy, racing_driver_policy
+from worldagent.agents.external import CallablePolicy
+from worldagent.agents.loaders import scripted_policy
+from worldagent.agents.policy import Policy
 from worldagent.envs.core import rollout
 from worldagent.envs.harvest import Harvest, generate_maps, make_params
 from worldagent.envs.racing.env import ParticleRacing
@@ -48,10 +50,10 @@ def test_each_episode_is_the_episode_a_plain_rollout_plays(worlds):
         single = jax.jit(lambda k, w: run_episode(RACING, policy, k, w, RACING.default_params, 300))(keys[b, r], world)
         assert float(single["return"]) == pytest.approx(float(metrics["return"][b, r]), abs=1e-4)
     # ... and the driver's episodes are those of core.rollout (a deterministic policy)
-    driver = racing_driver_policy()
+    driver = scripted_policy("racing", "driver")
     metrics = evaluate(RACING, driver, worlds, 2, jax.random.key(2))
     world = jax.tree_util.tree_map(lambda leaf: leaf[4], worlds)
-    final, _ = rollout(RACING, driver.as_rollout_policy(), jax.random.key(9), world, RACING.default_params, 300)
+    final, _ = rollout(RACING, driver, jax.random.key(9), world, RACING.default_params, 300)
     assert float(final.episode_return) == pytest.approx(float(metrics["return"][4, 0]), abs=1e-3)
     assert int(final.time) == int(metrics["steps"][4, 1])
 
@@ -68,7 +70,7 @@ def test_the_host_loop_evaluator_gives_the_same_output(worlds):
 def test_harvest_metrics_per_episode_and_per_agent():
     env = Harvest()
     params = make_params(can_tag=[True, False, False, False]).replace(max_steps=40)
-    metrics = evaluate(env, harvest_random_policy(), generate_maps(np.arange(3)), 4, jax.random.key(0), params)
+    metrics = evaluate(env, scripted_policy("harvest", "random"), generate_maps(np.arange(3)), 4, jax.random.key(0), params)
     assert metrics["group_reward"].shape == (3, 4) and metrics["conflict"].shape == (3, 4)
     assert metrics["returns"].shape == (3, 4, 4)
     np.testing.assert_allclose(metrics["returns"].sum(-1), metrics["group_reward"], atol=1e-5)

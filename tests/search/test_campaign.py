@@ -149,3 +149,27 @@ def test_store_exports_csv_and_round_trips_worlds(tmp_path):
         text = store.export_csv(tmp_path / "w.csv").read_text().splitlines()
     assert text[0].startswith("campaign,generation,slot,score,mean_group_reward,episodes,z0")
     assert text[1].startswith("w,0,0,3.0,3.0,2,0.0")
+
+
+def test_store_deletes_campaigns_with_their_evaluations(tmp_path):
+    with RunStore(tmp_path) as store:
+        for name in ("a", "b"):
+            campaign = store.open_campaign(name, "racing", "return", True, "random", 1, 0, {}, False)
+            store.add(campaign, 0, 0, np.zeros(2), 1.0, [{"return": 1.0}], 0.0)
+        assert store.delete_campaigns(["a", "missing"]) == 1
+        assert [c.name for c in store.campaigns()] == ["b"] and [e.campaign for e in store.evaluations()] == ["b"]
+        assert store.delete_campaigns([]) == 0
+        store.open_campaign("a", "racing", "return", True, "random", 1, 0, {}, False)  # the name is free again
+
+
+def test_the_best_evaluation_is_the_earliest_extreme_finite_score():
+    from worldagent.search.campaign import best_evaluation
+    from worldagent.store import Evaluation
+
+    def ev(slot, score):
+        return Evaluation("c", 0, slot, np.zeros(2), score, [], 0.0, 0.0)
+
+    evaluations = [ev(0, float("nan")), ev(1, 2.0), ev(2, 1.0), ev(3, 1.0), ev(4, 5.0)]
+    assert best_evaluation(evaluations, maximize=False).slot == 2
+    assert best_evaluation(evaluations, maximize=True).slot == 4
+    assert best_evaluation([ev(0, float("nan"))], maximize=True) is None

@@ -6,7 +6,8 @@ import jax
 import numpy as np
 import pytest
 
-from worldagent.agents.policy import Policy, racing_driver_policy
+from worldagent.agents.loaders import scripted_policy
+from worldagent.agents.policy import Policy
 from worldagent.envs.racing.env import ParticleRacing
 from worldagent.errors import WorldagentError
 from worldagent.search.campaign import CampaignSpec, run_campaign
@@ -38,7 +39,7 @@ def test_a_latents_score_is_the_metrics_mean_over_its_episodes(racing_generator)
 
 
 def test_a_campaign_over_generated_worlds_stores_worlds_and_episodes(tmp_path, racing_generator):
-    objective = LatentObjective(Objective("racing", "crashed", True), RACING, racing_driver_policy(), racing_generator, repeats=2)
+    objective = LatentObjective(Objective("racing", "crashed", True), RACING, scripted_policy("racing", "driver"), racing_generator, repeats=2)
     spec = CampaignSpec("max-crash", "racing", "crashed", True, "cmaes", 12, 0, config=OptimiserConfig(popsize=6))
     with RunStore(tmp_path) as store:
         evaluations = run_campaign(store, spec, objective, progress=False)
@@ -48,8 +49,16 @@ def test_a_campaign_over_generated_worlds_stores_worlds_and_episodes(tmp_path, r
     assert all(len(e.episodes) == 2 and set(e.episodes[0]) >= {"crashed", "return", "normalised_return"} for e in stored)
 
 
+def test_an_objective_takes_the_specs_metric_names_and_aliases():
+    assert Objective("racing", "reward", True).metric == "return"
+    assert Objective("racing", "crash_rate", True).metric == "crashed"
+    assert Objective("harvest", "reward", False).metric == "group_reward"
+
+
 def test_bad_objectives_are_refused(racing_generator, harvest_generator):
     with pytest.raises(WorldagentError, match="no metric 'speed'"):
         Objective("racing", "speed", True)
+    with pytest.raises(WorldagentError, match="unknown environment 'boats'"):
+        Objective("boats", "return", True)
     with pytest.raises(WorldagentError, match="makes harvest worlds"):
         LatentObjective(Objective("racing", "return", True), RACING, random_policy(), harvest_generator)

@@ -152,7 +152,7 @@ def test_harvest_reward_is_normalised_by_the_runs_best_episode():
     scale = Scale(spec.make_env()[1], 200.0)
     assert np.allclose(normalised_means(spec, worlds, scale), [0.3, 1.0])
     low = world_summary(spec, worlds[0], scale)
-    assert (low["raw"], low["normalised"], low["conflict"], low["equality"]) == (60.0, 0.3, 0.25, 0.5)
+    assert (low["raw"], low["conflict"], low["equality"]) == (60.0, 0.25, 0.5) and np.isclose(low["normalised"], 0.3)
     influence = {
         "summary": {
             "group_reward": {"default": {"mean": 100.0}, "influenced": {"mean": 90.0}},
@@ -163,7 +163,7 @@ def test_harvest_reward_is_normalised_by_the_runs_best_episode():
     results = {"harvest": {"random": {"mean_normalised": 0.65, "mean_raw": 130.0}, "min": low, "influence": influence, "scale": scale}}
     rows = {row.key: row for row in headlines(results)}
     assert rows["harvest.random.mean_normalised"].ours == 0.65 and rows["harvest.random.mean_normalised"].paper == 0.61
-    assert rows["harvest.min.normalised"].ours == 0.3 and rows["harvest.max.normalised"].ours is None
+    assert np.isclose(rows["harvest.min.normalised"].ours, 0.3) and rows["harvest.max.normalised"].ours is None
     assert (rows["harvest.influence.conflict_default"].ours, rows["harvest.influence.equality_influenced"].ours) == (0.5, 0.8)
     assert rows["harvest.influence.conflict_default"].paper == 0.51
     assert np.isclose(rows["harvest.influence.reward_change_pct"].ours, -10.0)

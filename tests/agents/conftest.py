@@ -6,15 +6,20 @@ import pytest
 
 from worldagent.agents.distributions import WorldPool, world_distribution
 from worldagent.agents.ppo import PPOConfig
-from worldagent.envs.racing.env import ParticleRacing
+from worldagent.envs import registry
 
 # Small enough to train in seconds on 2 CPU cores, large enough to learn something.
 TINY_PPO = PPOConfig(total_episodes=64, num_envs=8, num_steps=32, num_minibatches=2, update_epochs=2, hidden=(32, 32))
 
 
 @pytest.fixture(scope="session")
-def racing_env():
-    return ParticleRacing()
+def racing_spec():
+    return registry.get("racing")
+
+
+@pytest.fixture(scope="session")
+def racing_env(racing_spec):
+    return racing_spec.make_env()[0]
 
 
 @pytest.fixture(scope="session")

@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from worldagent.agents import training
+from worldagent.agents import algorithms
 from worldagent.agents.acktr import ACKTRConfig, make_train
 from worldagent.agents.distributions import world_distribution
 from worldagent.envs.racing.env import ParticleRacing
@@ -58,4 +58,4 @@ def test_config_checks_and_registration():
     assert ACKTRConfig.from_dict(TINY.to_dict()) == TINY
     with pytest.raises(WorldagentError, match="unknown fields"):
         ACKTRConfig.from_dict({"lr": 0.1})
-    assert training.get_algorithm("acktr").config_type is ACKTRConfig
+    assert algorithms.get_algorithm("acktr").config_type is ACKTRConfig

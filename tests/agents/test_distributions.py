@@ -74,13 +74,14 @@ def test_bad_specs_refused(tmp_path):
 
 
 def test_latent_worlds_decode_to_dataset_tracks(racing_pool):
+    from worldagent.envs.repairs import NearestWorld
     from worldagent.worlds.generator import Generator
     from worldagent.worlds.vae import VAE
 
     model = VAE(cell_count=64 * 64, latent_dim=10, encoder=(8,), decoder=(8,))
     params = model.init(jax.random.key(0), jnp.zeros((1, 64 * 64)), jax.random.key(1))["params"]
     rasters = jnp.asarray(racing_pool.worlds.raster.reshape(8, -1), jnp.float32)
-    generator = Generator(params, rasters, racing_pool.worlds, model, "racing", (64, 64), 0)
+    generator = Generator(params, NearestWorld(rasters, racing_pool.worlds), model, "racing", (64, 64))
     dist = LatentWorlds(generator)
     world = jax.jit(dist.sample)(jax.random.key(0))
     assert world.centreline.shape == (256, 2)

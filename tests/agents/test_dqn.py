@@ -1,20 +1,31 @@
-"""Independent DQN on Resource Harvest: learning, saving, resuming, refusing bad input (tiny budgets)."""
+"""Independent DQN on a tiny Resource Harvest: learning, saving, resuming, refusing bad input (tiny budgets).
+
+The tiny env (a 9x9 window, 50-step episodes) is registered as its own spec, as a third-party
+env would be, so the host driver runs it exactly as it runs harvest.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 
+import flax.serialization
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from worldagent.agents import replay as replay_lib
+from worldagent.agents import training
+from worldagent.agents.algorithms import training_config
 from worldagent.agents.distributions import WorldPool
-from worldagent.agents.dqn import DQNConfig, make_act, make_train, make_trainer
-from worldagent.agents.dqn_run import evaluate, load_agents, save_agents, train_harvest
-from worldagent.agents.policy import load_policy
+from worldagent.agents.dqn import DQNConfig, make_train
+from worldagent.agents.loaders import load_agent
+from worldagent.agents.policy import Policy, network_policy
+from worldagent.agents.saved import load_policy, save_policy
+from worldagent.envs import registry
+from worldagent.envs.core import rollout
+from worldagent.envs.harvest.env import Harvest, make_params
 from worldagent.envs.harvest.policies import random_act
 from worldagent.envs.harvest.world import HarvestMap
 from worldagent.errors import WorldagentError
@@ -30,14 +41,11 @@ TINY_MAP = """
 .........
 .........
 """
+EPISODE = 50
 
-# Small window and short episodes: the tiny map is in view from every corner.
 TINY = DQNConfig(
     num_episodes=16 * 8,
-    episode_length=50,
     num_envs=16,
-    view_size=9,
-    view_behind=2,
     hidden_sizes=(32, 32),
     batch_size=64,
     buffer_size=8_000,
@@ -45,9 +53,20 @@ TINY = DQNConfig(
     target_update_every=100,
     learning_rate=1e-3,
     epsilon_decay_episodes=16 * 4,
-    checkpoint_every=4,
-    seed=0,
 )
+
+
+def make_tiny(options):
+    """Small window and short episodes: the tiny map is in view from every corner."""
+    del options
+    return Harvest(view_size=9, view_behind=2), make_params(max_steps=EPISODE)
+
+
+@pytest.fixture(scope="module")
+def spec():
+    tiny = registry.register(dataclasses.replace(registry.get("harvest"), name="tiny_harvest", make=make_tiny, options=()))
+    yield tiny
+    registry.unregister("tiny_harvest")
 
 
 @pytest.fixture(scope="module")
@@ -57,9 +76,9 @@ def tiny_pool():
 
 
 @pytest.fixture(scope="module")
-def trained(tiny_pool, tmp_path_factory):
+def trained(spec, tiny_pool, tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    return train_harvest(TINY, tiny_pool, out, progress=False), out
+    return training.train(spec, "dqn", TINY, tiny_pool, out, seed=0, progress=False), out
 
 
 def test_pack_planes_round_trip():
@@ -80,123 +99,128 @@ def test_replay_samples_stored_transitions_with_their_successor():
     assert np.array_equal(np.argmax(np.asarray(batch["next_obs"])[:, 0, 0], -1), (steps + 1) % 4)
 
 
-def test_dqn_beats_random_on_tiny_map(trained, tiny_pool):
+def _group_reward(spec, policy, worlds, key, repeats=16):
+    env, params = spec.make_env()
+    one = lambda k: env.metrics(rollout(env, policy, k, jax.tree_util.tree_map(lambda x: x[0], worlds), params, EPISODE)[0])  # noqa: E731
+    return float(jax.jit(jax.vmap(one))(jax.random.split(key, repeats))["group_reward"].mean())
+
+
+def test_dqn_beats_random_on_tiny_map(spec, trained, tiny_pool):
     result, _ = trained
-    worlds = tiny_pool.worlds
     key = jax.random.key(7)
-    learned = evaluate(key, make_act(TINY), result.params, worlds, TINY, repeats=16)["group_reward"].mean()
-    random = evaluate(key, random_act, None, worlds, TINY, repeats=16)["group_reward"].mean()
-    assert learned > 2.0 * random, (float(learned), float(random))  # measured: about 26.5 vs 10-12
+    learned = _group_reward(spec, result.agent.policy, tiny_pool.worlds, key)  # epsilon-greedy, as trained
+    random = _group_reward(spec, Policy(None, lambda p, obs, k, s: random_act(p, obs, k)), tiny_pool.worlds, key)
+    assert learned > 2.0 * random, (learned, random)  # measured: about 26.5 vs 10-12
 
 
-def test_saved_agents_reload_and_act_identically(trained, tmp_path):
+def test_saved_agents_reload_and_act_identically(spec, trained):
     result, out = trained
-    act, params, config = load_agents(out / "agents", epsilon=0.0)
-    assert config == TINY
-    obs = jax.random.bernoulli(jax.random.key(3), 0.2, (5, 4, 9, 9, 4)).astype(jnp.uint8)
+    checkpoint = flax.serialization.msgpack_restore((out / training.CHECKPOINT_FILE).read_bytes())
+    params = jax.tree_util.tree_map(jnp.asarray, flax.serialization.from_state_dict(result.agent.params, checkpoint["params"]))
+    trained_policy = network_policy(result.agent.module, params, "q_network", greedy=True, num_agents=4)
+    loaded = load_agent(spec, str(out), greedy=True)  # the run directory, as `--agent` takes it
+    obs = jax.random.bernoulli(jax.random.key(3), 0.2, (4, 9, 9, 4)).astype(jnp.uint8)
     key = jax.random.key(4)
-    assert jnp.array_equal(act(params, obs, key), make_act(TINY, 0.0)(result.params, obs, key))
-    act_eps, _, _ = load_agents(out / "agents")  # epsilon-greedy with the config's act_epsilon: same key, same actions
-    assert jnp.array_equal(act_eps(params, obs, key), make_act(TINY)(result.params, obs, key))
-    assert act(params, obs[0], key).shape == (4,)
-    # The generic loader (policy.load_policy) gives the same agents when asked to be greedy.
-    saved = load_policy(out / "agents", env="harvest", algorithm="dqn", greedy=True)
-    assert saved.num_agents == 4 and jnp.array_equal(saved.policy(obs[0], key), act(params, obs[0], key))
+    assert jnp.array_equal(loaded.act(loaded.params, obs, key, None), trained_policy.act(params, obs, key, None))
+    explorer = load_policy(out / "policy")  # epsilon-greedy with the config's act_epsilon
+    assert explorer.extra["act_epsilon"] == TINY.act_epsilon and explorer.num_agents == 4 and explorer.algorithm == "dqn"
 
 
 def test_run_directory_contents(trained):
     result, out = trained
-    assert len(result.history) == TINY.num_chunks and result.env_steps == TINY.num_chunks * 16 * 50
-    lines = (out / "curve.csv").read_text().splitlines()
-    assert lines[0].startswith("chunk,episodes") and len(lines) == TINY.num_chunks + 1
+    assert len(result.curve["group_reward"]) == TINY.num_chunks and result.env_steps == TINY.num_chunks * 16 * EPISODE
+    header = (out / "curve.csv").read_text().splitlines()[0].split(",")
+    for field in ("update", "episodes", "group_reward", "equality", "conflict", "returns_0", "loss", "q", "epsilon"):
+        assert field in header, field
     assert (out / "curve.png").stat().st_size > 0
-    assert json.loads((out / "config.json").read_text())["num_episodes"] == TINY.num_episodes
+    run = json.loads((out / "run.json").read_text())
+    assert run["config"]["num_episodes"] == TINY.num_episodes and run["env"] == "tiny_harvest" and run["algorithm"] == "dqn"
 
 
-def test_resume_continues_from_checkpoint(tiny_pool, tmp_path):
-    short = dataclasses.replace(TINY, num_episodes=16 * 4, checkpoint_every=2)  # compiled once, shared with `trained`
-    full = train_harvest(short, tiny_pool, tmp_path / "a", progress=False)
-    # A run killed after its first checkpoint: keep only that checkpoint's files.
-    partial = dataclasses.replace(short, num_episodes=16 * 2)
-    train_harvest(partial, tiny_pool, tmp_path / "b", progress=False)
-    config = json.loads((tmp_path / "b" / "config.json").read_text())
-    config["num_episodes"] = short.num_episodes
-    (tmp_path / "b" / "config.json").write_text(json.dumps(config))
-    resumed = train_harvest(short, tiny_pool, tmp_path / "b", progress=False)
-    assert resumed.resumed_chunks == 2 and len(resumed.history) == 4
-    for a, b in zip(jax.tree_util.tree_leaves(full.params), jax.tree_util.tree_leaves(resumed.params)):
-        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+def test_resume_continues_from_checkpoint(spec, tiny_pool, tmp_path):
+    short = TINY.with_episodes(16 * 4)  # compiled once, shared with `trained`
+    full = training.train(spec, "dqn", short, tiny_pool, tmp_path / "a", progress=False)
+    killed = training.train(spec, "dqn", short, tiny_pool, tmp_path / "b", progress=False, stop_after_chunks=2)
+    assert killed.episodes == 32
+    resumed = training.train(spec, "dqn", short, tiny_pool, tmp_path / "b", progress=False)
+    assert resumed.resumed_from_update == 2 and len(resumed.curve["update"]) == 4
+    for a, b in zip(jax.tree_util.tree_leaves(full.agent.params), jax.tree_util.tree_leaves(resumed.agent.params)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    with pytest.raises(WorldagentError, match="another config"):
+        training.train(spec, "dqn", short.replace(hidden_sizes=(16,)), tiny_pool, tmp_path / "b", progress=False)
 
 
-def test_make_train_is_one_jitted_run(tiny_pool):
-    config = dataclasses.replace(TINY, num_episodes=32)
-    state, stats = make_train(config, tiny_pool)(jax.random.key(0))
-    assert stats["group_reward"].shape == (2, 16) and int(state.steps) == 100 and int(state.updates) > 0
+def _one_jitted_run(spec, tiny_pool, keys):
+    env, params = spec.make_env()
+    trainer = make_train(TINY.with_episodes(16), env, params, tiny_pool)  # one chunk: compiled with the driver's
+    run = trainer.train if keys.ndim == 0 else jax.vmap(trainer.train)
+    states, curve = run(keys)
+    assert curve["group_reward"].shape == (*keys.shape, 1) and np.all(np.asarray(states.steps) == EPISODE)
+    assert np.all(np.asarray(states.gradient_steps) > 0) and np.all(np.asarray(states.episodes) == 16)
+
+
+def test_make_train_is_one_jitted_run(spec, tiny_pool):
+    _one_jitted_run(spec, tiny_pool, jax.random.key(0))
+
+
+@pytest.mark.slow  # compiling the vmapped run takes ~40 s on 2 cores
+def test_make_train_is_vmappable_over_seeds(spec, tiny_pool):
+    _one_jitted_run(spec, tiny_pool, jax.random.split(jax.random.key(0), 2))
 
 
 @pytest.mark.parametrize(
     "change, message",
     [
-        ({"num_episodes": 0}, "num_episodes"),
-        ({"num_envs": -1}, "num_envs"),
-        ({"tagger": 4}, "tagger"),
+        ({"num_envs": 0}, "num_envs"),
         ({"hidden_sizes": ()}, "hidden_sizes"),
         ({"gamma": 1.0}, "gamma"),
-        ({"epsilon_end": 2.0}, "epsilon"),
-        ({"view_size": 4}, "view_size"),
+        ({"act_epsilon": 2.0}, "act_epsilon"),
+        ({"buffer_size": 10}, "buffer_size"),
+        ({"epsilon_end": 0.5, "epsilon_start": 0.1}, "exploration"),
     ],
 )
-def test_bad_settings_are_refused(change, message):
+def test_bad_configs_are_refused(change, message):
     with pytest.raises(WorldagentError, match=message):
-        make_trainer(dataclasses.replace(TINY, **change))
+        TINY.replace(**change)
 
 
-def test_unknown_algorithm_and_bad_distribution_are_refused(tiny_pool, tmp_path):
-    with pytest.raises(WorldagentError, match="unknown harvest algorithm 'ppo'"):
-        train_harvest(TINY, tiny_pool, tmp_path, algo="ppo")
+def test_bad_env_algorithm_and_distribution_are_refused(spec, tiny_pool, tmp_path):
+    racing_env, racing_params = registry.get("racing").make_env()
+    with pytest.raises(WorldagentError, match="multi-agent"):
+        make_train(TINY, racing_env, racing_params, tiny_pool)
+    with pytest.raises(WorldagentError, match="harvest trains with dqn, not ppo"):
+        training_config("harvest", "ppo")
     with pytest.raises(WorldagentError, match="sample"):
-        train_harvest(TINY, object(), tmp_path)
+        training.train(spec, "dqn", TINY, object(), tmp_path)
+    with pytest.raises(WorldagentError, match="DQNConfig"):
+        training.train(spec, "dqn", training_config("racing"), tiny_pool, tmp_path)
 
 
-def test_checkpoint_of_another_architecture_is_refused(trained, tiny_pool, tmp_path):
-    result, out = trained
-    # Agents saved with one architecture, described as another.
-    save_agents(tmp_path / "agents", result.params, TINY)
-    meta = json.loads((tmp_path / "agents" / "policy.json").read_text())
+def test_agents_of_another_architecture_are_refused(trained, tmp_path):
+    _, out = trained
+    meta = json.loads((out / "policy" / "policy.json").read_text())
     meta["network"]["config"]["hidden"] = [64, 64]
-    (tmp_path / "agents" / "policy.json").write_text(json.dumps(meta))
+    (tmp_path / "policy.json").write_text(json.dumps(meta))
+    (tmp_path / "policy.msgpack").write_bytes((out / "policy" / "policy.msgpack").read_bytes())
     with pytest.raises(WorldagentError, match="another network"):
-        load_agents(tmp_path / "agents")
-    meta["network"]["config"]["hidden"] = [32, 32]
-    meta["training"]["hidden_sizes"] = [16]
-    (tmp_path / "agents" / "policy.json").write_text(json.dumps(meta))
-    with pytest.raises(WorldagentError, match="another architecture"):
-        load_agents(tmp_path / "agents")
-    # Resuming a run directory with other settings.
-    with pytest.raises(WorldagentError, match="other settings.*hidden_sizes"):
-        train_harvest(dataclasses.replace(TINY, hidden_sizes=(16,)), tiny_pool, out, progress=False)
+        load_policy(tmp_path)
     with pytest.raises(WorldagentError, match="no saved policy"):
-        load_agents(tmp_path / "missing")
+        load_policy(tmp_path / "missing")
 
 
-def test_load_policy_acts_with_the_recorded_exploration_rate(tmp_path):
+def test_load_policy_acts_with_the_recorded_exploration_rate(spec, tmp_path):
     """Saved DQN agents act epsilon-greedily as trained (greedy memoryless agents get stuck)."""
-    import jax
-    import numpy as np
-
-    from worldagent.agents.dqn import DQNConfig, init_params
-    from worldagent.agents.dqn_run import save_agents
-    from worldagent.agents.policy import load_policy
-
-    config = DQNConfig(act_epsilon=0.5)
-    params = init_params(jax.random.key(0), config)
-    save_agents(tmp_path, params, config, extra={"act_epsilon": 0.5})
-    obs = np.zeros((4, config.view_size, config.view_size, 4), np.uint8)
-    keys = jax.random.split(jax.random.key(1), 400)
+    env, params = spec.make_env()
+    trainer = make_train(TINY, env, params, None)
+    stacked = jax.vmap(trainer.network.init, in_axes=(0, None))(jax.random.split(jax.random.key(0), 4), jnp.zeros((9, 9, 4), jnp.uint8))
+    save_policy(tmp_path, trainer.network, stacked, kind="q_network", algorithm="dqn", env="tiny_harvest",
+                obs_shape=(9, 9, 4), num_actions=8, num_agents=4, extra={"act_epsilon": 0.5})  # fmt: skip
+    obs = np.zeros((4, 9, 9, 4), np.uint8)
+    keys = jax.random.split(jax.random.key(1), 200)
     explorer = load_policy(tmp_path).policy
     greedy = load_policy(tmp_path, greedy=True).policy
-    acted = np.stack([np.asarray(explorer(obs, k)) for k in keys[:200]])
-    best = np.asarray(greedy(obs, keys[0]))
-    assert all(np.array_equal(np.asarray(greedy(obs, k)), best) for k in keys[:20])
-    differs = (acted != best).mean()
+    act = jax.jit(jax.vmap(lambda policy, k: policy.act(policy.params, obs, k, None), in_axes=(None, 0)))
+    acted, best = np.asarray(act(explorer, keys)), np.asarray(act(greedy, keys[:20]))
+    assert (best == best[0]).all()
+    differs = (acted != best[0]).mean()
     assert 0.3 < differs < 0.6  # ~0.5 · 7/8 of actions are random and not the argmax

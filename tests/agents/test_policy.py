@@ -5,15 +5,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from worldagent.agents.external import CallablePolicy, host_episode
+from worldagent.agents.loaders import load_agent
 from worldagent.agents.networks import ActorCritic, QNetwork
-from worldagent.agents.policy import (
-    CallablePolicy,
-    host_episode,
-    load_policy,
-    racing_driver_policy,
-    save_policy,
-    scripted_policy,
-)
+from worldagent.agents.saved import load_policy, save_policy
 from worldagent.envs.core import rollout
 from worldagent.envs.racing.env import episode_metrics
 from worldagent.errors import WorldagentError
@@ -36,7 +31,7 @@ def test_save_load_acts_identically(tmp_path):
         agent = load_policy(tmp_path, env="racing", greedy=greedy)
         assert agent.algorithm == "ppo" and agent.num_actions == 4 and agent.training == {"total_episodes": 1}
         logits, _ = net.apply(params, obs)
-        got = jax.vmap(agent.policy)(obs, keys)
+        got = jax.vmap(lambda o, k: agent.policy.act(agent.params, o, k, None))(obs, keys)
         want = jnp.argmax(logits, -1) if greedy else jax.vmap(jax.random.categorical)(keys, logits)
         np.testing.assert_array_equal(got, want)
 
@@ -71,22 +66,28 @@ def test_stacked_q_networks_round_trip(tmp_path):
     agent = load_policy(tmp_path, env="harvest")
     obs = jax.random.uniform(jax.random.key(1), (4, 5, 5, 4))
     want = jnp.stack([jnp.argmax(net.apply(jax.tree_util.tree_map(lambda x: x[i], params), obs[i])) for i in range(4)])
-    np.testing.assert_array_equal(agent.policy(obs, jax.random.key(2)), want)
+    np.testing.assert_array_equal(agent.policy.act(agent.params, obs, jax.random.key(2), None), want)
 
 
-def test_scripted_policies_fit(racing_env, racing_pool):
-    driver = racing_driver_policy()
+def test_load_agent_takes_run_dirs_policy_dirs_and_scripted_names(tmp_path, racing_spec, racing_env, racing_pool):
+    _saved(tmp_path / "run" / "policy")
+    obs = jnp.zeros(260)
+    for text in (tmp_path / "run", tmp_path / "run" / "policy"):
+        policy = load_agent(racing_spec, str(text), greedy=True)
+        assert policy.act(policy.params, obs, jax.random.key(0), None).shape == ()
+    driver = load_agent(racing_spec, "driver")
+    assert driver.privileged and driver.name == "driver"
     world = racing_pool.sample(jax.random.key(0))
-    final, _ = jax.jit(lambda k: rollout(racing_env, driver.as_rollout_policy(), k, world, racing_env.default_params, 300))(jax.random.key(0))
+    final, _ = jax.jit(lambda k: rollout(racing_env, driver, k, world, racing_env.default_params, 300))(jax.random.key(0))
     assert bool(episode_metrics(final)["lap_completed"])
-    from worldagent.envs.harvest.env import Harvest
-
-    harvest = Harvest()
-    obs = jnp.zeros((4, *harvest.observation_shape), jnp.uint8)
+    harvest_obs = jnp.zeros((4, 15, 15, 4), jnp.uint8)
     for name in ("random", "greedy"):
-        assert scripted_policy("harvest", name)(obs, jax.random.key(0)).shape == (4,)
-    with pytest.raises(WorldagentError, match="no scripted policy"):
-        scripted_policy("racing", "random")
+        policy = load_agent("harvest", name, options={"tagger": (0,)})
+        assert policy.act(policy.params, harvest_obs, jax.random.key(0), None).shape == (4,)
+    with pytest.raises(WorldagentError, match="nor a scripted racing policy \\(driver, random\\)"):
+        load_agent(racing_spec, "greedy")
+    with pytest.raises(WorldagentError, match="racing agent, not a harvest"):
+        load_agent("harvest", str(tmp_path / "run"))
 
 
 def test_callable_policy_host_loop(racing_env, racing_pool):

@@ -22,7 +22,7 @@ def _mean_returns(env, network, stacked_params, worlds, key):
 
     def one(params, world, k):
         policy = network_policy(network, params, "actor_critic")
-        final, _ = rollout(env, policy.as_rollout_policy(), k, world, env.default_params, 300)
+        final, _ = rollout(env, policy, k, world, env.default_params, 300)
         return episode_metrics(final)["return"]
 
     n = worlds.centreline.shape[0]

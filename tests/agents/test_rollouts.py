@@ -38,7 +38,7 @@ def test_collect_shapes_worlds_and_episodes(racing_env, racing_pool):
     starts = np.asarray(runner.state.world.centreline[:, 0])
     assert len(np.unique(starts.round(5), axis=0)) > 1  # envs start on different worlds
     step = jax.jit(lambda k, r: collect(k, r, net.apply, net_params, racing_env, params, racing_pool, 40))
-    runner, traj, (last_value, _) = step(jax.random.key(2), runner)
+    runner, traj, last_value = step(jax.random.key(2), runner)
     assert traj.obs.shape == (40, 16, *racing_env.observation_shape) and traj.action.shape == (40, 16) and last_value.shape == (16,)
     summary = episode_summary(traj)
     assert int(summary["episodes"]) == int(traj.done.sum()) > 0  # a random policy crashes quickly

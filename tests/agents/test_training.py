@@ -1,44 +1,79 @@
+"""The host driver (``training.train``) and the algorithm table (``algorithms``)."""
+
 import json
 
 import jax
 import numpy as np
 import pytest
 
-from worldagent.agents.metrics import normalised_return, racing_return_bounds
+from worldagent.agents.acktr import ACKTRConfig
+from worldagent.agents.algorithms import ALGORITHMS, get_algorithm, training_config
+from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.ppo import PPOConfig
-from worldagent.agents.training import get_algorithm, train_racing
+from worldagent.agents.training import plotted_metrics, train
+from worldagent.envs import registry
+from worldagent.envs.racing.metrics import normalised_return, racing_return_bounds
 from worldagent.errors import WorldagentError
 
 
-def test_train_racing_writes_run_and_resumes_identically(tmp_path, racing_pool, tiny_ppo):
-    whole = train_racing(tiny_ppo, racing_pool, tmp_path / "whole", seed=3, progress=False, chunk_updates=2)
+def test_train_writes_run_and_resumes_identically(tmp_path, racing_spec, racing_pool, tiny_ppo):
+    run = lambda out, **kw: train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / out, seed=3, progress=False, chunk_updates=2, **kw)  # noqa: E731
+    whole = run("whole")
     assert whole.episodes >= tiny_ppo.total_episodes and whole.resumed_from_update is None
     for name in ("run.json", "checkpoint.msgpack", "curve.csv", "curve.png", "policy/policy.json", "policy/policy.msgpack"):
         assert (tmp_path / "whole" / name).is_file(), name
-    assert json.loads((tmp_path / "whole" / "run.json").read_text())["seed"] == 3
+    record = json.loads((tmp_path / "whole" / "run.json").read_text())
+    assert (record["seed"], record["env"], record["algorithm"], record["options"]) == (3, "racing", "ppo", {})
     assert len(whole.curve["return"]) == int(whole.agent.extra["updates"])
+    for field in ("crashed", "lap_completed", "progress", "policy_loss", "active"):  # the env's info entries are curve columns
+        assert field in whole.curve, field
 
-    killed = train_racing(tiny_ppo, racing_pool, tmp_path / "killed", seed=3, progress=False, chunk_updates=2, stop_after_chunks=1)
+    killed = run("killed", stop_after_chunks=1)
     assert killed.episodes < tiny_ppo.total_episodes
-    resumed = train_racing(tiny_ppo, racing_pool, tmp_path / "killed", seed=3, progress=False, chunk_updates=2)
+    resumed = run("killed")
     assert resumed.resumed_from_update == 2
     for a, b in zip(jax.tree_util.tree_leaves(whole.agent.params), jax.tree_util.tree_leaves(resumed.agent.params)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(whole.curve["episodes"], resumed.curve["episodes"])
 
     with pytest.raises(WorldagentError, match="another seed"):
-        train_racing(tiny_ppo, racing_pool, tmp_path / "killed", seed=4, progress=False)
+        train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / "killed", seed=4, progress=False)
+    with pytest.raises(WorldagentError, match="another algorithm"):
+        train(racing_spec, "acktr", ACKTRConfig(total_episodes=8), racing_pool, tmp_path / "killed", seed=3, progress=False)
 
 
-def test_unknown_algorithm_and_wrong_config(tmp_path, racing_pool, tiny_ppo):
+def test_unknown_algorithm_wrong_config_and_bad_options(tmp_path, racing_pool, tiny_ppo):
     with pytest.raises(WorldagentError, match="unknown algorithm 'sac'"):
         get_algorithm("sac")
     with pytest.raises(WorldagentError, match="unknown algorithm"):
-        train_racing(tiny_ppo, racing_pool, tmp_path, algo="sac")
+        train("racing", "sac", tiny_ppo, racing_pool, tmp_path)
     with pytest.raises(WorldagentError, match="PPOConfig"):
-        train_racing({"total_episodes": 10}, racing_pool, tmp_path)
-    with pytest.raises(WorldagentError, match="total_episodes"):
-        PPOConfig(total_episodes=0)
+        train("racing", "ppo", {"total_episodes": 10}, racing_pool, tmp_path)
+    with pytest.raises(WorldagentError, match="no option 'tagger'"):
+        train("racing", "ppo", tiny_ppo, racing_pool, tmp_path, options={"tagger": 0})
+    with pytest.raises(WorldagentError, match="chunk_updates"):
+        train("racing", "ppo", tiny_ppo, racing_pool, tmp_path, chunk_updates=0)
+
+
+def test_training_config_follows_the_spec():
+    assert set(ALGORITHMS) == {"ppo", "acktr", "dqn"}
+    assert isinstance(training_config("racing"), PPOConfig) and isinstance(training_config("harvest"), DQNConfig)
+    assert training_config("racing", episodes=12).total_episodes == 12
+    assert training_config("harvest", episodes=12).num_episodes == 12
+    config = training_config("racing", "acktr", episodes=20, num_envs=4)
+    assert isinstance(config, ACKTRConfig) and (config.total_episodes, config.num_envs) == (20, 4)
+    assert training_config("racing", base=PPOConfig(num_envs=2), episodes=5) == PPOConfig(num_envs=2, total_episodes=5)
+    with pytest.raises(WorldagentError, match="racing trains with ppo, acktr, not dqn"):
+        training_config("racing", "dqn")
+    with pytest.raises(WorldagentError, match="no field 'lr'"):
+        training_config("racing", lr=0.1)
+    with pytest.raises(WorldagentError, match="takes a PPOConfig"):
+        training_config("racing", base=DQNConfig())
+
+
+def test_plotted_metrics_are_the_main_and_highlighted_ones():
+    assert plotted_metrics(registry.get("racing"), ["return", "crashed", "loss"]) == ["return", "crashed"]
+    assert plotted_metrics(registry.get("harvest"), ["group_reward", "conflict", "equality"]) == ["group_reward", "conflict", "equality"]
 
 
 def test_normalised_return_bounds():

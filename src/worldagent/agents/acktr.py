@@ -11,24 +11,23 @@ pytorch-a2c-ppo-acktr. ACKTR is A2C whose actor and critic are updated together 
   ``ε ~ N(0, 1)``, as ``log π(ã) - (V - sg(V + ε))²`` (baselines' ``vf_fisher_coef`` = 1);
 - no gradient clipping (ikostrikov clips only for A2C).
 
-Same API shape as ``ppo.py`` (``make_train(config, env, env_params, distribution) -> Trainer``
-with ``init``, ``train_chunk``, ``train``; ``train(key)`` vmappable over seeds; the budget is
-counted in episodes and updates after it is spent are skipped), so the host loop
-``training.train_racing(..., algo="acktr")`` drives it; importing this module registers it there.
+The trainer contract of ``trainer.py`` (``make_train(config, env, env_params, distribution) ->
+Trainer``; the budget is counted in episodes), so the host driver ``training.train`` runs it.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 
-from worldagent.agents import training
 from worldagent.agents.kfac import KFAC, KFACConfig
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.ppo import CURVE_FIELDS, Trainer, TrainState, budgeted_trainer, max_updates, raw_key, training_params
+from worldagent.agents.ppo import TrainState, max_updates, training_params, update_row
 from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
+from worldagent.agents.trainer import Trainer, budgeted_trainer, raw_key
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
 
@@ -124,47 +123,56 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
 
     Args:
         config: ``ACKTRConfig``.
-        env: a single-agent env with flat observations (Particle Racing).
-        env_params: its params (``env.default_params``); ``config.respawn`` overrides racing's respawn.
-        distribution: a world distribution (``distributions.py``), closed over as a constant.
+        env: a single-agent env with flat observations (e.g. Particle Racing).
+        env_params: its params; ``config.respawn`` sets ``respawn`` where the params have it.
+        distribution: a world distribution (``distributions.py``).
 
     Returns:
-        A ``ppo.Trainer``: ``init(key)``, ``train_chunk(state, n)``, ``train(key)`` (vmappable over
-        keys), ``network``, ``max_updates``, ``done(state)``. Curve rows have ``ppo.CURVE_FIELDS``;
-        for ACKTR ``learning_rate`` is the step size η the trust region allowed and ``approx_kl``
-        the KL it predicts, ``½ η² Δᵀ F̂ Δ``.
+        A ``trainer.Trainer``. Curve rows are PPO's (``ppo.update_row``); for ACKTR
+        ``learning_rate`` is the step size η the trust region allowed and ``approx_kl`` the KL it
+        predicts, ``½ η² Δᵀ F̂ Δ``.
     """
     if not isinstance(config, ACKTRConfig):
         raise WorldagentError(f"config is a {type(config).__name__}; pass an ACKTRConfig.")
     if getattr(env, "num_agents", 1) != 1:
-        raise WorldagentError("ACKTR here trains single-agent envs (racing); use the independent DQN for harvest.")
+        raise WorldagentError(f"ACKTR trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
     env_params = training_params(env_params, config.respawn)
-    network = ActorCritic(env.num_actions, config.hidden, config.activation)
-    kfac_config = config.kfac_config()
-    kfac = KFAC(kfac_config, network.apply)
-    batch = config.num_envs * config.num_steps
     budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
+    init, update, network = _core(config, env)
+    return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution))
+
+
+@functools.lru_cache(maxsize=16)
+def _core(config: ACKTRConfig, env):
+    """``init(key, consts)``, ``update(state, consts)`` and the network; consts = (env_params, distribution).
+    Cached, so trainers of the same config and env share their compilation."""
+    network = ActorCritic(env.num_actions, config.hidden, config.activation)
+    kfac = KFAC(config.kfac_config(), network.apply)
+    batch = config.num_envs * config.num_steps
     example_obs = jnp.zeros((batch, *env.observation_shape), jnp.float32)
 
-    def init(key: jax.Array) -> TrainState:
+    def init(key: jax.Array, consts) -> TrainState:
+        params_env, distribution = consts
         key_net, key_env, key_run = jax.random.split(key, 3)
         params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
-        runner = init_runner(key_env, env, env_params, distribution, config.num_envs)
+        runner = init_runner(key_env, env, params_env, distribution, config.num_envs)
         zero = jnp.int32(0)
         return TrainState(params, kfac.init(params, example_obs), runner, raw_key(key_run), zero, zero, zero)
 
-    def update(state: TrainState) -> tuple[TrainState, dict]:
-        key, key_roll, key_fisher = jax.random.split(jax.random.wrap_key_data(state.key), 3)
-        runner, traj, last = collect(key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps)
-        last_value = last[0] if isinstance(last, tuple) else last  # (value, potential) in newer rollouts
+    def targets(traj, last_value):
+        """f32[B·T] value targets: n-step returns, or GAE targets when ``gae_lambda < 1``."""
         rewards = traj.reward * config.reward_scale
         if config.gae_lambda < 1.0:
-            _, returns = gae(rewards, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
-        else:
-            returns = nstep_returns(rewards, traj.done, last_value, config.gamma)
+            return gae(rewards, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)[1].reshape(batch)
+        return nstep_returns(rewards, traj.done, last_value, config.gamma).reshape(batch)
+
+    def update(state: TrainState, consts) -> tuple[TrainState, dict]:
+        params_env, distribution = consts
+        key, key_roll, key_fisher = jax.random.split(jax.random.wrap_key_data(state.key), 3)
+        runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
+        returns = targets(traj, last_value)
         obs = traj.obs.reshape(batch, *traj.obs.shape[2:])
         action = traj.action.reshape(batch)
-        returns = returns.reshape(batch)
 
         def loss_fn(outputs):
             logits, value = outputs
@@ -192,25 +200,10 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
             {**state.params, "params": params}, opt_state, runner, raw_key(key), state.update + 1,
             state.episodes + summary["episodes"], state.env_steps + batch,
         )  # fmt: skip
-        row = {
-            "active": 1.0,
-            "episodes": new_state.episodes,
-            "env_steps": new_state.env_steps,
-            "return": summary["return"],
-            "length": summary["length"],
-            "crashed": summary.get("crashed", jnp.nan),
-            "lap_completed": summary.get("lap_completed", jnp.nan),
-            "progress": summary.get("progress", jnp.nan),
-            "policy_loss": policy_loss,
-            "value_loss": value_loss,
-            "entropy": ent,
-            "approx_kl": 0.5 * info["step_size"] ** 2 * info["fisher_quadratic"],
-            "learning_rate": info["step_size"],
-        }
-        return new_state, {k: jnp.asarray(row[k], jnp.float32) for k in CURVE_FIELDS}
+        kl = 0.5 * info["step_size"] ** 2 * info["fisher_quadratic"]
+        row = update_row(
+            new_state, summary, policy_loss=policy_loss, value_loss=value_loss, entropy=ent, approx_kl=kl, learning_rate=info["step_size"]
+        )
+        return new_state, row
 
-    return budgeted_trainer(init, update, config.total_episodes, budget, network)
-
-
-ALGORITHM = training.Algorithm("acktr", ACKTRConfig, make_train)
-training.register_algorithm(ALGORITHM)
+    return init, update, network

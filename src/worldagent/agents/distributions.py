@@ -14,7 +14,7 @@ Two kinds cover the issue's three cases:
   worlds with weights is the influenced training distribution (§6.2).
 - ``LatentWorlds(generator)``: ``G(z)`` with ``z ~ N(0, I)`` (paper Equation 3).
 
-``world_distribution(env, spec, ...)`` builds one on the host from a spec string: ``"generator"``
+``world_distribution(env, spec_text, ...)`` builds one on the host from a string: ``"generator"``
 (a procedural pool), ``"vae"`` (needs a generator directory), or a dataset ``.npz`` path.
 """
 
@@ -28,8 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.worlds.kinds import ENV_NAMES
 
 DEFAULT_POOL_SIZE = 10_000  # the paper's dataset size (§5.2.1)
 
@@ -137,30 +137,16 @@ class LatentWorlds:
 WorldDistribution = WorldPool | LatentWorlds
 
 
-def env_name(env: Any) -> str:
-    """ "racing" or "harvest" from a name or an Environment object."""
-    if isinstance(env, str):
-        name = env
-    else:
-        from worldagent.envs.harvest.env import Harvest
-        from worldagent.envs.racing.env import ParticleRacing
-
-        name = "racing" if isinstance(env, ParticleRacing) else "harvest" if isinstance(env, Harvest) else type(env).__name__
-    if name not in ENV_NAMES:
-        raise WorldagentError(f"unknown environment {name!r}; use one of: {', '.join(ENV_NAMES)}.")
-    return name
-
-
 def procedural_pool(env: Any, size: int = DEFAULT_POOL_SIZE, seed: int = 0, progress: bool = False) -> WorldPool:
-    """The procedural generator as a uniform pool of ``size`` worlds with seeds ``seed, seed+1, ...``."""
+    """The procedural generator of ``env`` (a name or ``EnvSpec``) as a uniform pool of ``size`` worlds, seeds ``seed, seed+1, ...``."""
     from worldagent.worlds.dataset import make_dataset
 
-    return WorldPool.create(make_dataset(env_name(env), size, seed, progress=progress).worlds)
+    return WorldPool.create(make_dataset(registry.get(env), size, seed, progress=progress).worlds)
 
 
 def world_distribution(
     env: Any,
-    spec: str,
+    spec_text: str,
     *,
     size: int = DEFAULT_POOL_SIZE,
     seed: int = 0,
@@ -171,8 +157,8 @@ def world_distribution(
     """Build a world distribution on the host from a spec string.
 
     Args:
-        env: "racing" or "harvest" (or the env object).
-        spec: ``"generator"``: the procedural generator, a uniform pool of ``size`` worlds from
+        env: the environment, a name ("racing") or an ``EnvSpec``.
+        spec_text: ``"generator"``: the procedural generator, a uniform pool of ``size`` worlds from
             seeds ``seed, seed+1, ...``; ``"vae"``: ``G(z)``, ``z ~ N(0, I)``, from the generator
             directory ``generator_dir`` (a directory holding ``generator.json`` may also be given
             as the spec itself); or the path of a dataset ``.npz`` (``worldagent dataset``), its
@@ -185,29 +171,29 @@ def world_distribution(
     Returns:
         A ``WorldPool`` or ``LatentWorlds``.
     """
-    name = env_name(env)
-    if not isinstance(spec, (str, Path)):
-        raise WorldagentError(f"world distribution spec {spec!r} is not a string; use 'generator', 'vae' or a dataset .npz path.")
-    spec = str(spec)
-    if spec == "generator":
+    name = registry.get(env).name
+    if not isinstance(spec_text, (str, Path)):
+        raise WorldagentError(f"world distribution {spec_text!r} is not a string; use 'generator', 'vae' or a dataset .npz path.")
+    text = str(spec_text)
+    if text == "generator":
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
             raise WorldagentError(f"pool size={size!r}; ask for at least 1 world.")
         if weights is not None:
             raise WorldagentError("weights apply to a dataset file; save the worlds as a dataset and pass its path.")
         return procedural_pool(name, int(size), seed, progress)
-    if spec == "vae" or (Path(spec).is_dir() and (Path(spec) / "generator.json").is_file()):
-        directory = generator_dir if spec == "vae" else spec
+    if text == "vae" or (Path(text).is_dir() and (Path(text) / "generator.json").is_file()):
+        directory = generator_dir if text == "vae" else text
         if directory is None:
-            raise WorldagentError("spec 'vae' needs a generator directory; pass generator_dir (made by `worldagent generator train`).")
+            raise WorldagentError("'vae' needs a generator directory; pass generator_dir (made by `worldagent generator train`).")
         from worldagent.worlds.generator import load_generator
 
         generator, _, _ = load_generator(directory)
         if generator.env != name:
             raise WorldagentError(f"generator {directory} makes {generator.env} worlds, not {name} worlds; pass a {name} generator.")
         return LatentWorlds(generator)
-    path = Path(spec)
+    path = Path(text)
     if path.suffix == ".npz" or path.exists():
         from worldagent.worlds.dataset import WorldDataset
 
         return WorldPool.create(WorldDataset.load(path, env=name).worlds, weights)
-    raise WorldagentError(f"unknown world distribution {spec!r}; use 'generator', 'vae' or the path of a dataset .npz file.")
+    raise WorldagentError(f"unknown world distribution {text!r}; use 'generator', 'vae' or the path of a dataset .npz file.")

@@ -1,6 +1,6 @@
 """Networks of the agents (Flax linen, pure ``init``/``apply``), and how to rebuild them from a config.
 
-``ActorCritic`` is the racing agent of PPO and ACKTR: two separate MLP torsos (actor, critic)
+``ActorCritic`` is the agent of PPO and ACKTR (racing's): two separate MLP torsos (actor, critic)
 on the flat observation (position, velocity / top speed, route ahead; see ``envs/racing/env.py``).
 
 Sizes and why: two hidden layers of 128 units, tanh. The paper's agent (pytorch-a2c-ppo-acktr's
@@ -92,11 +92,6 @@ class QNetwork(nn.Module):
 
 
 NETWORKS: dict[str, type[nn.Module]] = {"actor_critic": ActorCritic, "q_network": QNetwork}
-
-
-def register_network(kind: str, module: type[nn.Module]) -> None:
-    """Make ``module`` (a linen dataclass of JSON-able fields) loadable by ``kind`` (e.g. a DQN's conv net)."""
-    NETWORKS[kind] = module
 
 
 def network_config(module: nn.Module) -> dict:

@@ -1,4 +1,4 @@
-"""PPO (Schulman et al. 2017) for the racing agent, jitted end to end in the style of PureJaxRL.
+"""PPO (Schulman et al. 2017), jitted end to end in the style of PureJaxRL (``trainer.py``'s contract).
 
 The paper trains its racing agent with ACKTR for 10,000 episodes (§5.3); PPO is the modern
 default, kept to the same budget: training stops once ``total_episodes`` episodes have ended,
@@ -8,20 +8,18 @@ so episodes, not env steps, are what is counted.
     state, curve = trainer.train(key)                       # the whole run, one jitted call
     states, curves = jax.vmap(trainer.train)(keys)          # several seeds at once
 
-``train`` is ``init`` followed by ``train_chunk(state, max_updates)``; the host loop of
-``training.train_racing`` calls ``train_chunk(state, n)`` instead, a few updates at a time, and
-saves a checkpoint, the learning curve and the progress bar between chunks. Updates after the
-budget is spent are skipped (``lax.cond``), so chunks may overshoot the budget harmlessly: the
-result is the same however the run is chunked. The curve has one row per update, NaN on
-updates that did not run (``curve["active"]`` is False there).
+The host driver (``training.train``) calls ``train_chunk(state, n)`` a few updates at a time.
+The curve has one row per update: the training statistics and the mean of every per-episode
+entry of the env's step ``info`` over the episodes that ended (racing: crashed, lap_completed,
+progress), whatever the env reports.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -29,15 +27,8 @@ import optax
 from flax import struct
 
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.rollouts import (
-    EnvRunner,
-    action_log_prob,
-    collect,
-    entropy,
-    episode_summary,
-    gae,
-    init_runner,
-)
+from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner
+from worldagent.agents.trainer import Trainer, budgeted_trainer, curve_row, raw_key
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
 
@@ -145,52 +136,8 @@ class TrainState:
     env_steps: jax.Array
 
 
-class Trainer(NamedTuple):
-    """What ``make_train`` returns (all pure; ``train_chunk`` and ``train`` are jitted).
-
-    Attributes:
-        init: ``init(key) -> TrainState``.
-        train_chunk: ``train_chunk(state, n) -> (state, curve)``, ``n`` updates (static); each
-            ``curve`` entry is f32[n] (see ``CURVE_FIELDS``).
-        train: ``train(key) -> (state, curve)``, the whole budget (``max_updates`` rows).
-        network: the ``ActorCritic`` module.
-        max_updates: updates that surely spend the budget (every env ends an episode at
-            least every ``max_steps`` steps).
-        done: ``done(state) -> bool``, the budget is spent.
-    """
-
-    init: Callable
-    train_chunk: Callable
-    train: Callable
-    network: ActorCritic
-    max_updates: int
-    done: Callable
-
-
-CURVE_FIELDS = (
-    "active",
-    "episodes",
-    "env_steps",
-    "return",
-    "length",
-    "crashed",
-    "lap_completed",
-    "progress",
-    "policy_loss",
-    "value_loss",
-    "entropy",
-    "approx_kl",
-    "learning_rate",
-)
-
-
-def raw_key(key: jax.Array) -> jax.Array:
-    """u32 key data (serialisable with msgpack) of a typed or raw PRNG key."""
-    return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
-
-
 def training_params(env_params, respawn: bool):
-    """The env params a learner trains under: racing's respawn-on-crash set as configured."""
+    """The env params a learner trains under: respawn-on-crash set as configured, where params have it."""
     return env_params.replace(respawn=respawn) if hasattr(env_params, "respawn") else env_params
 
 
@@ -199,30 +146,10 @@ def max_updates(total_episodes: int, num_envs: int, num_steps: int, max_episode_
     return math.ceil(math.ceil(total_episodes / num_envs) * max_episode_steps / num_steps) + 1
 
 
-def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budget: int, network: Any) -> Trainer:
-    """A ``Trainer`` from ``init(key) -> state`` and ``update(state) -> (state, curve row)``.
-
-    Updates run in jitted chunks (``lax.scan``); once ``total_episodes`` episodes have ended the
-    remaining ones are skipped (their curve rows NaN, ``active`` 0), so a chunk may overshoot
-    the budget harmlessly. ``budget`` is the number of updates ``train(key)`` scans.
-    """
-
-    def done(state) -> jax.Array:
-        return state.episodes >= total_episodes
-
-    def skip(state):
-        return state, {k: jnp.float32(0.0 if k == "active" else jnp.nan) for k in CURVE_FIELDS}
-
-    def guarded(state, _):
-        return jax.lax.cond(done(state), skip, update, state)
-
-    train_chunk = jax.jit(lambda state, n: jax.lax.scan(guarded, state, None, length=n), static_argnums=1)
-
-    @jax.jit
-    def train(key: jax.Array):
-        return train_chunk(init(key), budget)
-
-    return Trainer(init, train_chunk, train, network, budget, done)
+def update_row(state: TrainState, summary: dict, **stats) -> dict:
+    """One curve row: progress, the episodes' means (``episode_summary`` less its count) and ``stats``."""
+    episodes = {name: value for name, value in summary.items() if name != "episodes"}
+    return curve_row({"active": 1.0, "episodes": state.episodes, "env_steps": state.env_steps, **episodes, **stats})
 
 
 def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
@@ -230,98 +157,91 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
 
     Args:
         config: ``PPOConfig``.
-        env: a single-agent env with flat observations (Particle Racing).
-        env_params: its params (``env.default_params``); ``config.respawn`` overrides racing's respawn.
-        distribution: a world distribution (``distributions.py``); it is closed over as a
-            constant of the compiled program, so keep pools at dataset size (10,000 worlds).
+        env: a single-agent env with flat observations (e.g. Particle Racing).
+        env_params: its params; ``config.respawn`` sets ``respawn`` where the params have it.
+        distribution: a world distribution (``distributions.py``), passed to the jitted
+            functions as an argument.
 
     Returns:
-        A ``Trainer``; ``train(key)`` is vmappable over keys (seeds).
+        A ``trainer.Trainer``; ``train(key)`` is vmappable over keys (seeds).
     """
     if not isinstance(config, PPOConfig):
         raise WorldagentError(f"config is a {type(config).__name__}; pass a PPOConfig.")
     if getattr(env, "num_agents", 1) != 1:
-        raise WorldagentError("PPO here trains single-agent envs (racing); use the independent DQN for harvest.")
+        raise WorldagentError(f"PPO trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
     env_params = training_params(env_params, config.respawn)
-    network = ActorCritic(
-        env.num_actions,
-        config.hidden,
-        config.activation,
-    )
+    budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
+    init, update, network = _core(config, env)
+    return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution))
+
+
+@functools.lru_cache(maxsize=16)
+def _core(config: PPOConfig, env):
+    """``init(key, consts)``, ``update(state, consts)`` and the network; consts = (env_params, distribution).
+    Cached, so trainers of the same config and env share their compilation."""
+    network = ActorCritic(env.num_actions, config.hidden, config.activation)
     tx = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam(eps=1e-5))
     batch = config.num_envs * config.num_steps
     minibatch = batch // config.num_minibatches
-    horizon = int(env_params.max_steps)
-    budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, horizon)
 
-    def init(key: jax.Array) -> TrainState:
+    def init(key: jax.Array, consts) -> TrainState:
+        params_env, distribution = consts
         key_net, key_env, key_run = jax.random.split(key, 3)
         params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
-        runner = init_runner(key_env, env, env_params, distribution, config.num_envs)
+        runner = init_runner(key_env, env, params_env, distribution, config.num_envs)
         zero = jnp.int32(0)
         return TrainState(params, tx.init(params), runner, raw_key(key_run), zero, zero, zero)
 
-    def loss_fn(params, batch_data, clip_eps):
+    def loss_fn(params, batch_data):
         obs, action, old_log_prob, old_value, advantage, target = batch_data
         logits, value = network.apply(params, obs)
         log_prob = action_log_prob(logits, action)
         ratio = jnp.exp(log_prob - old_log_prob)
         advantage = (advantage - advantage.mean()) / (advantage.std() + 1e-8)
-        policy_loss = -jnp.minimum(ratio * advantage, jnp.clip(ratio, 1 - clip_eps, 1 + clip_eps) * advantage).mean()
-        value_clipped = old_value + jnp.clip(value - old_value, -clip_eps, clip_eps)
+        clip = config.clip_eps
+        policy_loss = -jnp.minimum(ratio * advantage, jnp.clip(ratio, 1 - clip, 1 + clip) * advantage).mean()
         value_loss = (value - target) ** 2
         if config.clip_value:
-            value_loss = jnp.maximum(value_loss, (value_clipped - target) ** 2)
+            value_loss = jnp.maximum(value_loss, (old_value + jnp.clip(value - old_value, -clip, clip) - target) ** 2)
         value_loss = 0.5 * value_loss.mean()
         ent = entropy(logits).mean()
         total = policy_loss + config.vf_coef * value_loss - config.ent_coef * ent
         approx_kl = ((ratio - 1) - (log_prob - old_log_prob)).mean()
         return total, (policy_loss, value_loss, ent, approx_kl)
 
-    def update(state: TrainState) -> tuple[TrainState, dict]:
-        key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
-        runner, traj, (last_value, _) = collect(key_roll, state.runner, network.apply, state.params, env, env_params, distribution, config.num_steps)
-        rewards = traj.reward * config.reward_scale
-        advantages, targets = gae(rewards, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
-        flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731
-        data = tuple(map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets)))
-        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
-        lr = config.learning_rate * (1.0 - fraction) if config.anneal_lr else jnp.float32(config.learning_rate)
+    def learn(params, opt_state, data, lr, key):
+        """``update_epochs`` passes of minibatch Adam steps over one update's data."""
 
         def epoch(carry, key_epoch):
-            params, opt_state = carry
             order = jax.random.permutation(key_epoch, batch).reshape(config.num_minibatches, minibatch)
 
             def minibatch_step(carry, index):
                 params, opt_state = carry
-                grads, aux = jax.grad(loss_fn, has_aux=True)(params, tuple(x[index] for x in data), config.clip_eps)
+                grads, aux = jax.grad(loss_fn, has_aux=True)(params, tuple(x[index] for x in data))
                 updates, opt_state = tx.update(grads, opt_state, params)
                 params = optax.apply_updates(params, jax.tree_util.tree_map(lambda u: -lr * u, updates))
                 return (params, opt_state), aux
 
-            return jax.lax.scan(minibatch_step, (params, opt_state), order)
+            return jax.lax.scan(minibatch_step, carry, order)
 
-        (params, opt_state), aux = jax.lax.scan(epoch, (state.params, state.opt_state), jax.random.split(key_perm, config.update_epochs))
+        return jax.lax.scan(epoch, (params, opt_state), jax.random.split(key, config.update_epochs))
+
+    def update(state: TrainState, consts) -> tuple[TrainState, dict]:
+        params_env, distribution = consts
+        key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
+        runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
+        advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
+        flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731
+        data = tuple(map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets)))
+        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
+        lr = config.learning_rate * (1.0 - fraction) if config.anneal_lr else jnp.float32(config.learning_rate)
+        (params, opt_state), aux = learn(state.params, state.opt_state, data, lr, key_perm)
         summary = episode_summary(traj)
         new_state = TrainState(
             params, opt_state, runner, raw_key(key), state.update + 1, state.episodes + summary["episodes"], state.env_steps + batch
         )
         policy_loss, value_loss, ent, approx_kl = (x.mean() for x in aux)
-        row = {
-            "active": jnp.float32(1.0),
-            "episodes": new_state.episodes.astype(jnp.float32),
-            "env_steps": new_state.env_steps.astype(jnp.float32),
-            "return": summary["return"],
-            "length": summary["length"],
-            "crashed": summary.get("crashed", jnp.nan),
-            "lap_completed": summary.get("lap_completed", jnp.nan),
-            "progress": summary.get("progress", jnp.nan),
-            "policy_loss": policy_loss,
-            "value_loss": value_loss,
-            "entropy": ent,
-            "approx_kl": approx_kl,
-            "learning_rate": jnp.float32(lr),
-        }
-        return new_state, {k: jnp.asarray(row[k], jnp.float32) for k in CURVE_FIELDS}
+        row = update_row(new_state, summary, policy_loss=policy_loss, value_loss=value_loss, entropy=ent, approx_kl=approx_kl, learning_rate=lr)
+        return new_state, row
 
-    return budgeted_trainer(init, update, config.total_episodes, budget, network)
+    return init, update, network

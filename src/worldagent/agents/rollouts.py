@@ -4,7 +4,7 @@ Shared by PPO and ACKTR (paper §5.3). One call of ``collect`` is one ``lax.scan
 ``num_steps`` steps over ``B`` envs at once (``vmap``), pure and jittable::
 
     runner = init_runner(key, env, env_params, distribution, num_envs)
-    runner, traj, (last_value, _) = collect(key, runner, apply_fn, net_params, env, env_params, distribution, num_steps)
+    runner, traj, last_value = collect(key, runner, apply_fn, net_params, env, env_params, distribution, num_steps)
     advantages, targets = gae(traj.reward, traj.value, traj.done, last_value, gamma, lam)
 
 Worlds (issue 5, "every env in a training batch can be on a different world"): every env
@@ -63,11 +63,9 @@ class Trajectory:
         reward: f32 rewards.
         done: bool, the episode ended at this step (terminated or truncated).
         terminated: bool, it ended by the env's rules (crash, lap), not the time limit.
-        potential: f32 shaping potential Φ of the state each action was chosen from (0
-            without a ``potential_fn``); see ``shaped_rewards``.
         episode: dict of per-episode metrics, meaningful where ``done``: "return" (f32),
-            "length" (i32) and the env step's ``info`` entries at that step (racing:
-            "crashed", "lap_completed", "progress").
+            "length" (i32) and the env step's per-env ``info`` entries at that step (racing:
+            "crashed", "lap_completed", "progress"), whatever the env reports.
     """
 
     obs: jax.Array
@@ -77,7 +75,6 @@ class Trajectory:
     reward: jax.Array
     done: jax.Array
     terminated: jax.Array
-    potential: jax.Array
     episode: dict
 
 
@@ -115,7 +112,6 @@ def collect(
     env_params,
     distribution,
     num_steps: int,
-    potential_fn: Callable[[Any], jax.Array] | None = None,
 ) -> tuple[EnvRunner, Trajectory, jax.Array]:
     """Run the policy for ``num_steps`` steps in every env (see module docstring).
 
@@ -127,18 +123,15 @@ def collect(
         env, env_params: the environment and its params.
         distribution: a world distribution with ``sample(key) -> world``.
         num_steps: T, steps per env (static).
-        potential_fn: optional ``Φ(env_state) -> f32`` (one env) recorded for reward shaping.
 
     Returns:
-        ``(runner, trajectory [T, B], last)``: the carry to continue from, the segment, and
-        ``last = (value f32[B], potential f32[B])`` of the state after its last step (for
-        bootstrapping and shaping).
+        ``(runner, trajectory [T, B], last_value f32[B])``: the carry to continue from, the
+        segment, and the value of the state after its last step (for bootstrapping).
     """
     num_envs = runner.episode_return.shape[0]
     key_worlds, key_steps = jax.random.split(key)
     pending = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
     step_env = jax.vmap(lambda k, s, a, w: step_autoreset(env, k, s, a, env_params, next_world=w))
-    potential = (lambda state: jnp.zeros(num_envs, jnp.float32)) if potential_fn is None else jax.vmap(potential_fn)
 
     def one_step(runner: EnvRunner, step_key):
         key_act, key_env = jax.random.split(step_key)
@@ -148,20 +141,15 @@ def collect(
         done = jnp.logical_or(terminated, truncated)
         episode_return = runner.episode_return + reward
         episode_length = runner.episode_length + 1
-        episode = {"return": episode_return, "length": episode_length, **info}
-        record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, potential(runner.state), episode)
+        per_env = {name: value for name, value in info.items() if jnp.ndim(value) == 1}  # per-agent entries do not summarise
+        episode = {"return": episode_return, "length": episode_length, **per_env}
+        record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, episode)
         runner = EnvRunner(obs, state, jnp.where(done, 0.0, episode_return), jnp.where(done, 0, episode_length))
         return runner, record
 
     runner, trajectory = jax.lax.scan(one_step, runner, jax.random.split(key_steps, num_steps))
     _, last_value = apply_fn(net_params, runner.obs)
-    return runner, trajectory, (last_value, potential(runner.state))
-
-
-def shaped_rewards(trajectory: Trajectory, last_potential: jax.Array, gamma: float) -> jax.Array:
-    """f32[T, B] ``r + γΦ(s') - Φ(s)`` (potential-based shaping, Ng et al. 1999; Φ = 0 after an episode ends)."""
-    next_potential = jnp.concatenate([trajectory.potential[1:], last_potential[None]], axis=0)
-    return trajectory.reward + gamma * next_potential * (1.0 - trajectory.done.astype(jnp.float32)) - trajectory.potential
+    return runner, trajectory, last_value
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[jax.Array, jax.Array]:

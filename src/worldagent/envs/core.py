@@ -13,20 +13,13 @@ Per-episode metrics are accumulated in ``state`` so that evaluation never stores
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from worldagent.errors import WorldagentError
-
-
-class World(Protocol):
-    """A world: a ``flax.struct.dataclass`` of fixed-shape arrays with a host-side check."""
-
-    def validate(self) -> None:
-        """Raise ``WorldagentError`` naming the problem if the world is not playable."""
 
 
 class Environment:
@@ -117,7 +110,8 @@ def rollout(env: Environment, policy, key: jax.Array, world: Any, params: Any, n
     """One episode of at most ``num_steps`` steps as a ``lax.scan``; frozen once it ends.
 
     Args:
-        policy: ``policy(key, obs, state) -> action`` (pure JAX).
+        policy: a policy value with ``params`` and ``act(params, obs, key, state) -> action``
+            (pure JAX): ``agents.policy.Policy`` or ``registry.ScriptedPolicy``.
 
     Returns:
         (final_state, trajectory): ``trajectory`` holds per-step pytrees with a leading time axis
@@ -130,7 +124,7 @@ def rollout(env: Environment, policy, key: jax.Array, world: Any, params: Any, n
     def one_step(carry, step_key):
         obs, state, done = carry
         key_act, key_env = jax.random.split(step_key)
-        action = policy(key_act, obs, state)
+        action = policy.act(policy.params, obs, key_act, state)
         next_obs, next_state, reward, terminated, truncated, _ = env.step(key_env, state, action, params)
         keep = lambda new, old: jax.lax.select(done, old, new)  # noqa: E731
         next_obs = keep(next_obs, obs)

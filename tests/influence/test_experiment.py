@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -11,33 +12,27 @@ import pytest
 from PIL import Image
 
 from worldagent.agents.dqn import DQNConfig
-from worldagent.agents.policy import Policy, harvest_random_policy
+from worldagent.agents.policy import Policy
 from worldagent.agents.ppo import PPOConfig
-from worldagent.envs.harvest import make_params
-from worldagent.envs.racing.env import ParticleRacing
 from worldagent.errors import WorldagentError
-from worldagent.influence import influence, load_influenced_worlds
-from worldagent.influence.experiment import example_indices, mean_and_ci
+from worldagent.experiments import example_worlds, influence, setup
+from worldagent.influence import load_influenced_worlds
+from worldagent.influence.statistics import mean_and_ci
+from worldagent.influence.worlds import example_indices
 from worldagent.reports.influence import influence_figure
 from worldagent.store import RunStore
 
-RACING = ParticleRacing()
-RACING_PARAMS = RACING.default_params.replace(max_steps=60)  # short episodes keep the test fast
 TINY_PPO = PPOConfig(total_episodes=8, num_envs=4, num_steps=16, num_minibatches=2, update_epochs=1, hidden=(8,))
 SELECT = "crash_rate > 0.5 and progress > 0.005"  # a random driver crashes; some worlds let it get further
 TINY_DQN = DQNConfig(
     num_episodes=8,
-    episode_length=40,
     num_envs=8,
-    view_size=9,
-    view_behind=2,
     hidden_sizes=(16,),
     batch_size=32,
     buffer_size=1000,
     learning_starts=50,
     target_update_every=20,
     epsilon_decay_episodes=4,
-    checkpoint_every=1,
 )
 
 
@@ -45,20 +40,22 @@ def random_driver() -> Policy:
     return Policy(None, lambda params, obs, key, state=None: jax.random.randint(key, (), 0, 4), "random")
 
 
+def racing_setup(generator):
+    """Random driving, 2 episodes per world, evaluated over 60-step episodes (fast)."""
+    base = setup("racing", random_driver(), generator, repeats=2)
+    return dataclasses.replace(base, params=base.params.replace(max_steps=60))
+
+
 def run_racing(run_dir, generator, selection=SELECT):
     return influence(
         run_dir,
-        "racing",
-        random_driver(),
-        generator,
-        RACING_PARAMS,
+        racing_setup(generator),
         selection,
         algo="ppo",
         episodes=8,
         seeds=(0, 1),
         candidates=24,
         eval_worlds=8,
-        repeats=2,
         config=TINY_PPO,
         progress=False,
     )
@@ -150,14 +147,17 @@ def test_a_selection_that_matched_nothing_can_be_loosened_in_the_same_directory(
 
 
 def test_bad_arguments_are_refused_before_any_work(tmp_path, racing_generator, harvest_generator):
+    racing = racing_setup(racing_generator)
     with pytest.raises(WorldagentError, match="unknown algorithm 'dqn' for racing"):
-        influence(tmp_path, "racing", random_driver(), racing_generator, RACING_PARAMS, SELECT, algo="dqn", episodes=8)
+        influence(tmp_path, racing, SELECT, algo="dqn", episodes=8)
     with pytest.raises(WorldagentError, match="makes harvest worlds"):
-        influence(tmp_path, "racing", random_driver(), harvest_generator, RACING_PARAMS, SELECT, algo="ppo", episodes=8)
+        influence(tmp_path, dataclasses.replace(racing, generator=harvest_generator), SELECT, episodes=8)
     with pytest.raises(WorldagentError, match="seeds"):
-        influence(tmp_path, "racing", random_driver(), racing_generator, RACING_PARAMS, SELECT, algo="ppo", episodes=8, seeds=())
+        influence(tmp_path, racing, SELECT, episodes=8, seeds=())
+    with pytest.raises(WorldagentError, match="episodes=0"):
+        influence(tmp_path, racing, SELECT, episodes=0)
     with pytest.raises(WorldagentError, match="unknown racing metric 'conflict'"):
-        influence(tmp_path, "racing", random_driver(), racing_generator, RACING_PARAMS, "conflict == 0", algo="ppo", episodes=8)
+        influence(tmp_path, racing, "conflict == 0", algo="ppo", episodes=8)
     assert not (tmp_path / "store.sqlite").exists()
 
 
@@ -168,36 +168,25 @@ def test_one_seed_has_no_interval_rather_than_a_zero_one():
 
 
 def test_harvest_with_a_search_for_more_worlds_and_figure_8(tmp_path, harvest_generator):
-    params = make_params(can_tag=[True, False, False, False], max_steps=TINY_DQN.episode_length)
+    harvest = setup("harvest", "random", harvest_generator, options={"tagger": (0,)}, repeats=2)
+    harvest = dataclasses.replace(harvest, params=harvest.params.replace(max_steps=40))  # short evaluation episodes
     result = influence(
-        tmp_path,
-        "harvest",
-        harvest_random_policy(),
-        harvest_generator,
-        params,
-        "conflict == 0",
-        algo="dqn",
-        episodes=8,
-        seeds=(0,),
-        candidates=16,
-        search_budget=12,
-        eval_worlds=8,
-        repeats=2,
-        tagger=0,
-        config=TINY_DQN,
-        progress=False,
+        tmp_path, harvest, "conflict == 0", episodes=8, seeds=(0,), candidates=16, search_budget=12, eval_worlds=8, config=TINY_DQN, progress=False
     )
+    assert result["algo"] == "dqn"  # the env's default algorithm
     assert result["worlds"]["campaigns"] == ["influence-candidates", "influence-search"]
     assert result["worlds"]["tried"] == 16 + 21  # CMA-ES evaluates whole generations of 21
     assert result["metrics"] == ["group_reward", "conflict", "equality"]
+    assert result["config"]["options"] == {"tagger": [0]}
     assert math.isnan(result["summary"]["equality"]["default"]["ci95"])
     assert json.loads((tmp_path / "influence.json").read_text())["summary"]["equality"]["default"]["ci95"] is None
-    assert json.loads((tmp_path / "agents" / "default-s0" / "config.json").read_text())["tagger"] == 0
+    assert (tmp_path / "agents" / "default-s0" / "policy").is_dir()
     worlds, _, values = load_influenced_worlds(tmp_path, "harvest")
     assert np.all(values["conflict"] == 0)
     picks = example_indices(values, 4)
     assert 1 <= len(picks) <= 4 and len(set(picks.tolist())) == len(picks)
-    examples = jax.tree_util.tree_map(lambda leaf: leaf[picks], worlds)
+    examples = example_worlds(tmp_path, "harvest", 4)
+    np.testing.assert_array_equal(examples.walls, np.asarray(worlds.walls)[picks])
     figure = influence_figure(json.loads((tmp_path / "influence.json").read_text()), examples, "harvest", tmp_path / "figure.png")
     with Image.open(figure) as image:
         assert image.size[0] > image.size[1] > 100

@@ -38,7 +38,7 @@ def test_other_bad_options_exit_2(tmp_path):
     for args, message in (
         (["influence", "boats", "--select", "reward > 0", *common], "unknown environment 'boats'"),
         (["influence", "racing", "--select", "reward > 0", "--algo", "dqn", *common], "unknown algorithm 'dqn' for racing"),
-        (["influence", "racing", "--select", "reward > 0", "--tagger", "0", *common], "--tagger applies to harvest only"),
+        (["influence", "racing", "--select", "reward > 0", "--option", "tagger=0", *common], "racing has no option 'tagger'"),
         (["influence", "harvest", "--select", "crash_rate > 0.5", *common], "unknown harvest metric 'crash_rate'"),
     ):
         result = runner.invoke(app, args)

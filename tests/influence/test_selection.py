@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.influence.experiment import search_direction, select_worlds
 from worldagent.influence.selection import parse_selection
+from worldagent.influence.worlds import search_direction, select_worlds
 from worldagent.store import Evaluation, RunStore
-from worldagent.worlds.kinds import world_kind
 
 
 def evaluation(episodes: list[dict]) -> Evaluation:
@@ -104,7 +104,7 @@ def test_search_direction_follows_the_first_clause():
 
 def harvest_store(tmp_path, conflicts: list[list[float]]) -> RunStore:
     """A store with one campaign of harvest worlds whose episodes have the given conflicts."""
-    maps = world_kind("harvest").generate(np.arange(len(conflicts)))
+    maps = registry.get("harvest").generate(np.arange(len(conflicts)))
     store = RunStore(tmp_path)
     campaign = store.open_campaign("influence-candidates", "harvest", "conflict", False, "random", len(conflicts), 0, {}, False)
     for slot, values in enumerate(conflicts):
@@ -128,7 +128,7 @@ def test_select_worlds_keeps_the_matching_worlds_with_their_latents(tmp_path):
 
 def test_select_worlds_keeps_each_distinct_world_once(tmp_path):
     """Latents that decode to the same world count once: the new distribution is over worlds, not visits."""
-    maps = world_kind("harvest").generate(np.arange(2))
+    maps = registry.get("harvest").generate(np.arange(2))
     store = RunStore(tmp_path)
     campaign = store.open_campaign("influence-candidates", "harvest", "conflict", False, "random", 4, 0, {}, False)
     for slot, which in enumerate([0, 1, 0, 0]):  # world 0 visited three times

@@ -90,7 +90,7 @@ def trained_policies(agent_dirs: dict[str, Path], spec, greedy: bool) -> dict[st
         shape = (
             policy.name,
             jax.tree_util.tree_structure(policy.params),
-            [(np.shape(x), np.result_type(x)) for x in jax.tree_util.tree_leaves(policy.params)],
+            [(np.shape(x), str(getattr(x, "dtype", type(x).__name__))) for x in jax.tree_util.tree_leaves(policy.params)],
         )
         if template is not None and template[0] == shape:
             policy = template[1].replace(params=policy.params)

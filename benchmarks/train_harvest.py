@@ -4,7 +4,8 @@
     python benchmarks/train_harvest.py --tagger none           # nobody tags
     python benchmarks/train_harvest.py --episodes 800          # a shorter run (the time is extrapolated)
 
-Trains four independent DQNs (``worldagent.agents.dqn``, default ``DQNConfig``) on a uniform
+Trains four independent DQNs (``worldagent.agents.dqn``, harvest's default config from
+``algorithms.training_config``) through the host driver ``training.train`` on a uniform
 pool of procedurally generated maps (seeds 0..pool-1), then plays the trained agents
 (epsilon-greedy with ``DQNConfig.act_epsilon``; also greedy and at 0.05 and 0.1) and
 uniformly random agents on the same held-out maps (seeds from 1,000,000), ``--repeats``
@@ -14,13 +15,12 @@ and agent-steps per second, the group-reward ratio trained / random, and equalit
 (the paper's default agents with agent 0 tagging: conflict 0.51, equality 0.33, §6.2.2). When
 ``--episodes`` is below the paper's 5,000 the full-budget time is extrapolated from the measured
 rate and labelled so. Results go to ``benchmarks/results/train_harvest-<tagger>-<backend>.json``
-with the machine's description; the run directory (curve, checkpoint, agents) to ``--out``.
+with the machine's description; the run directory (curve, checkpoint, policy) to ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -30,15 +30,33 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import describe_machine, record  # noqa: E402
+from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import WorldPool  # noqa: E402
-from worldagent.agents.dqn import DQNConfig, make_act  # noqa: E402
-from worldagent.agents.dqn_run import evaluate, train_harvest  # noqa: E402
+from worldagent.agents.dqn import DQNConfig  # noqa: E402
+from worldagent.agents.loaders import load_agent  # noqa: E402
+from worldagent.agents.policy import network_policy  # noqa: E402
+from worldagent.agents.training import train  # noqa: E402
+from worldagent.envs import registry  # noqa: E402
+from worldagent.envs.core import rollout  # noqa: E402
 from worldagent.envs.harvest.maps import generate_maps, seeds_from  # noqa: E402
-from worldagent.envs.harvest.policies import random_act  # noqa: E402
 
 PAPER_EPISODES = 5000
 TARGET_MINUTES = 60
 EVAL_SEED = 1_000_000
+
+
+SPEC = registry.get("harvest")
+
+
+def evaluate(key, policy, worlds, env, params, repeats: int) -> dict:
+    """``env.metrics`` of ``policy``'s episodes on each world: f[B, repeats] (``returns`` f[B, repeats, 4])."""
+
+    def one(world, k):
+        return env.metrics(rollout(env, policy, k, world, params, int(params.max_steps))[0])
+
+    n = jax.tree_util.tree_leaves(worlds)[0].shape[0]
+    keys = jax.random.split(key, (n, repeats))
+    return jax.jit(jax.vmap(lambda w, ks: jax.vmap(lambda k: one(w, k))(ks)))(worlds, keys)
 
 
 def summary(metrics: dict) -> dict:
@@ -51,7 +69,7 @@ def summary(metrics: dict) -> dict:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--episodes", type=int, default=PAPER_EPISODES, help="training episodes per agent (paper: 5000)")
-    parser.add_argument("--tagger", default="0", help="agent allowed to TAG (0-3), or 'none' (paper §6.2.2: 0)")
+    parser.add_argument("--tagger", default="0", help="agents allowed to TAG (e.g. 0 or 0,2), or 'none' (paper §6.2.2: 0)")
     parser.add_argument("--num-envs", type=int, default=DQNConfig.num_envs)
     parser.add_argument("--pool", type=int, default=10_000, help="training maps (the paper's dataset: 10,000)")
     parser.add_argument("--eval-worlds", type=int, default=100)
@@ -61,38 +79,43 @@ def main(argv=None) -> dict:
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
 
-    tagger = None if args.tagger.lower() == "none" else int(args.tagger)
-    config = dataclasses.replace(DQNConfig(), num_episodes=args.episodes, tagger=tagger, num_envs=args.num_envs, seed=args.seed)
-    name = f"tagger{tagger}" if tagger is not None else "notag"
+    options = SPEC.parse_options([f"tagger={args.tagger}"])
+    config = training_config(SPEC, "dqn", episodes=args.episodes, num_envs=args.num_envs)
+    name = f"tagger{','.join(map(str, options['tagger']))}" if options["tagger"] else "notag"
     out = args.out or Path(f"/tmp/worldagent-train-harvest-{name}-{int(time.time())}")
     pool = WorldPool.create(generate_maps(seeds_from(0, args.pool)))
+    env, params = SPEC.make_env(options)
 
     start = time.perf_counter()
-    result = train_harvest(config, pool, out, progress=not args.quiet, resume=False)
+    result = train(SPEC, "dqn", config, pool, out, seed=args.seed, options=options, progress=not args.quiet, resume=False)
     wall = time.perf_counter() - start
     env_steps_per_s = result.env_steps / wall
-    full_budget_s = PAPER_EPISODES * config.episode_length / env_steps_per_s
+    full_budget_s = PAPER_EPISODES * int(params.max_steps) / env_steps_per_s
 
     worlds = generate_maps(seeds_from(EVAL_SEED, args.eval_worlds))
     key = jax.random.key(args.seed + 1)
-    trained = summary(evaluate(key, make_act(config), result.params, worlds, config, args.repeats))
+    agent = result.agent
+    trained = summary(evaluate(key, agent.policy, worlds, env, params, args.repeats))
     by_epsilon = {
-        str(eps): summary(evaluate(key, make_act(config, eps), result.params, worlds, config, args.repeats))
+        str(eps): summary(
+            evaluate(key, network_policy(agent.module, agent.params, "q_network", num_agents=4, epsilon=eps), worlds, env, params, args.repeats)
+        )
         for eps in (0.0, 0.05, 0.1)
         if eps != config.act_epsilon
     }
-    random = summary(evaluate(key, random_act, None, worlds, config, args.repeats))
+    random = summary(evaluate(key, load_agent(SPEC, "random", options=options), worlds, env, params, args.repeats))
     figures = {
         "command": "python benchmarks/train_harvest.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "config": {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(config).items()},
-        "episodes_trained": config.num_chunks * config.num_envs,
+        "options": {k: list(v) if isinstance(v, tuple) else v for k, v in options.items()},
+        "config": config.to_dict(),
+        "episodes_trained": result.episodes,
         "env_steps": result.env_steps,
         "agent_steps": 4 * result.env_steps,
         "train_wall_s": round(wall, 1),
         "env_steps_per_s": round(env_steps_per_s),
         "agent_steps_per_s": round(4 * env_steps_per_s),
         "paper_budget_wall_min": round(full_budget_s / 60, 1),
-        "paper_budget_wall_is": "measured" if config.num_chunks * config.num_envs >= PAPER_EPISODES else "extrapolated from the measured rate",
+        "paper_budget_wall_is": "measured" if result.episodes >= PAPER_EPISODES else "extrapolated from the measured rate",
         "target_min": TARGET_MINUTES,
         "eval": {
             "worlds": args.eval_worlds,
@@ -105,7 +128,7 @@ def main(argv=None) -> dict:
         "trained_at_other_epsilon": by_epsilon,
         "group_reward_ratio": round(trained["group_reward"] / max(random["group_reward"], 1e-9), 2),
         "paper_default_agents_tagging": {"conflict": 0.51, "equality": 0.33},
-        "final_training_chunk": result.history[-1],
+        "final_training_chunk": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
         "run_dir": str(out),
     }
     path = record(f"train_harvest-{name}", figures)

@@ -7,10 +7,10 @@ Training draws each episode's world uniformly from a procedural pool of 10,000 t
 generator — G(z), z ~ N(0, I), from ``runs/generators/racing`` if that generator exists, else
 fresh procedural tracks (seeds 1,000,000 + i, never trained on) — 8 episodes each with the
 stochastic policy, one jitted ``vmap(vmap(rollout))``. Records wall time and env steps/s of
-training, crash rate, lap rate and the mean return, raw and normalised
-(``worldagent.agents.metrics``), with the machine (``machine.record``).
+training, crash rate, lap rate and the mean return, raw and normalised (the spec's
+``metrics.normalise``), with the machine (``machine.record``).
 
-Algorithms are a table (``TRAINERS``): ACKTR adds its name and config there.
+Algorithms and their default configs come from ``worldagent.agents.algorithms``.
 """
 
 from __future__ import annotations
@@ -25,24 +25,23 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 from machine import record  # noqa: E402
-from worldagent.agents.acktr import ACKTRConfig  # noqa: E402  (importing it registers "acktr" for train_racing)
+from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import LatentWorlds, world_distribution  # noqa: E402
-from worldagent.agents.metrics import normalised_return, racing_return_bounds  # noqa: E402
-from worldagent.agents.ppo import PPOConfig  # noqa: E402
-from worldagent.agents.training import train_racing  # noqa: E402
+from worldagent.agents.training import train  # noqa: E402
+from worldagent.envs import registry  # noqa: E402
 from worldagent.envs.core import rollout  # noqa: E402
-from worldagent.envs.racing.env import ParticleRacing, episode_metrics  # noqa: E402
+from worldagent.envs.racing.metrics import racing_return_bounds  # noqa: E402
 
 GENERATOR_DIR = Path("runs/generators/racing")
-TRAINERS = {"ppo": PPOConfig, "acktr": ACKTRConfig}  # name -> config class (defaults = the paper's budget)
+SPEC = registry.get("racing")
 
 
 def evaluate(policy, worlds, repeats: int, key, env, params) -> dict[str, np.ndarray]:
     """Per-episode metrics [B, repeats] of ``policy`` on a batch of B worlds."""
 
     def one(world, k):
-        final, _ = rollout(env, policy.as_rollout_policy(), k, world, params, int(params.max_steps))
-        return episode_metrics(final)
+        final, _ = rollout(env, policy, k, world, params, int(params.max_steps))
+        return env.metrics(final)
 
     def per_world(world, k):
         return jax.vmap(one, in_axes=(None, 0))(world, jax.random.split(k, repeats))
@@ -64,7 +63,7 @@ def evaluation_worlds(key, n: int, env):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--algo", choices=sorted(TRAINERS), default="ppo")
+    parser.add_argument("--algo", choices=SPEC.algorithms, default=SPEC.default_algorithm)
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--episodes", type=int, default=10_000)
@@ -73,18 +72,18 @@ def main() -> None:
     parser.add_argument("--no-resume", action="store_true")
     args = parser.parse_args()
 
-    env = ParticleRacing()
-    params = env.default_params
+    env, params = SPEC.make_env()
     out = args.out or Path(f"runs/agents/racing-{args.algo}")
-    config = TRAINERS[args.algo](total_episodes=args.episodes)
+    config = training_config(SPEC, args.algo, episodes=args.episodes)
     start = time.perf_counter()
     pool = world_distribution("racing", "generator", size=10_000, seed=0)
     pool_seconds = time.perf_counter() - start
-    result = train_racing(
+    result = train(
+        SPEC,
+        args.algo,
         config,
         pool,
         out,
-        args.algo,
         seed=args.seed,
         progress=True,
         resume=not args.no_resume,
@@ -117,8 +116,8 @@ def main() -> None:
             "crash_rate": round(float(metrics["crashed"].mean()), 4),
             "lap_rate": round(float(metrics["lap_completed"].mean()), 4),
             "mean_return_raw": round(float(raw.mean()), 2),
-            "mean_return_normalised": round(float(normalised_return(raw, params).mean()), 4),
-            "normalisation": f"clip((raw - {low}) / ({high} - {low}), 0, 1), agents/metrics.py",
+            "mean_return_normalised": round(float(SPEC.metrics.normalise(raw, params).mean()), 4),
+            "normalisation": f"clip((raw - {low}) / ({high} - {low}), 0, 1), envs/racing/metrics.py",
             "mean_steps": round(float(metrics["steps"].mean()), 1),
             "seconds": round(eval_seconds, 2),
         },

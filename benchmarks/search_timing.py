@@ -1,11 +1,11 @@
 """Time one CMA-ES generation and a 1,000-world random evaluation (paper §5.2.2, §6.1.1).
 
-    python benchmarks/search_timing.py --generator runs/generators/racing
+    python benchmarks/search_timing.py --generator runs/generators/racing [--env racing --agent driver]
 
 A generation is 21 latents × 8 episodes, G(z) decoding and repair included, through the same
 ``LatentObjective`` a campaign uses (store writes excluded). The random evaluation is 1,000
-latents z ~ N(0, I) × 8 episodes. The agent is the scripted racing driver (episodes of ~200
-steps, like a trained agent's). Compilation is excluded (one warm-up call); best of
+latents z ~ N(0, I) × 8 episodes. The agent is by default the scripted racing driver (episodes
+of ~200 steps, like a trained agent's); ``--env`` and ``--agent`` pick others. Compilation is excluded (one warm-up call); best of
 ``--repeats``. Targets on 2 CPU cores: ≤ 0.2 s per generation, ≤ 5 s per 1,000 worlds.
 """
 
@@ -20,11 +20,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import record  # noqa: E402
-from worldagent.agents.policy import racing_driver_policy  # noqa: E402
-from worldagent.envs.racing.env import ParticleRacing  # noqa: E402
+from worldagent.experiments import setup  # noqa: E402
 from worldagent.search.objectives import LatentObjective, Objective  # noqa: E402
 from worldagent.search.optimisers import make_optimiser  # noqa: E402
-from worldagent.worlds.generator import load_generator  # noqa: E402
 
 
 def best_time(fn, repeats: int) -> float:
@@ -42,12 +40,13 @@ def main() -> None:
     parser.add_argument("--generator", type=Path, default=Path("runs/generators/racing"))
     parser.add_argument("--worlds", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--env", default="racing")
+    parser.add_argument("--agent", default="driver", help="a scripted policy's name or a `worldagent train` run directory")
     args = parser.parse_args()
 
-    generator, _, _ = load_generator(args.generator)
-    objective = LatentObjective(
-        Objective("racing", "return", False), ParticleRacing(), racing_driver_policy(), generator, repeats=8, keep_worlds=False
-    )
+    run = setup(args.env, args.agent, args.generator, repeats=8)
+    generator = run.generator
+    objective = LatentObjective(Objective(run.spec.name, "reward", False), run.env, run.policy, generator, run.repeats, run.params, keep_worlds=False)
     cmaes = make_optimiser("cmaes", generator.latent_dim, maximize=False, seed=0)
 
     def generation():
@@ -64,7 +63,8 @@ def main() -> None:
         "generation_seconds": round(generation_s, 4),
         "random_evaluation_seconds": round(random_s, 3),
         "worlds": args.worlds,
-        "agent": "racing driver",
+        "env": run.spec.name,
+        "agent": args.agent,
     }
     print(f"recorded in {record('search_timing', result)}")
 

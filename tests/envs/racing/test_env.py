@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from worldagent.envs.core import rollout, step_autoreset
-from worldagent.envs.racing.driver import driver_policy
+from worldagent.envs.racing.driver import DriverParams, driver_action
 from worldagent.envs.racing.env import ROUTE_SCALE, ParticleRacing, RacingParams, episode_metrics, locate, split_observation, wrap_half
 from worldagent.envs.racing.tracks import rasterize
 from worldagent.envs.racing.world import HALF_WIDTH, RASTER_SIZE, ROAD_SIZE, Track, pack_road, to_pixel, unpack_road
+from worldagent.envs.registry import ScriptedPolicy
 from worldagent.errors import WorldagentError
 
 ENV = ParticleRacing()
@@ -19,7 +20,8 @@ PARAMS = RacingParams()
 EAST = 0
 KEY = jax.random.key(0)
 step = jax.jit(ENV.step)
-drive = jax.jit(lambda key, world: rollout(ENV, driver_policy(PARAMS), key, world, PARAMS, 300))
+DRIVER = ScriptedPolicy((PARAMS, DriverParams()), lambda params, obs, key, state: driver_action(state, *params), privileged=True)
+drive = jax.jit(lambda key, world: rollout(ENV, DRIVER, key, world, PARAMS, 300))
 
 
 def oval_track(a: float = 0.6, b: float = 0.4, num_points: int = 256) -> Track:
@@ -34,8 +36,7 @@ def oval():
     return oval_track()
 
 
-def random_policy(key, obs, state):
-    return jax.random.randint(key, (), 0, ENV.num_actions)
+RANDOM = ScriptedPolicy(None, lambda params, obs, key, state: jax.random.randint(key, (), 0, ENV.num_actions))
 
 
 def arrive_at(env, state, target, action=EAST):
@@ -97,7 +98,7 @@ def test_a_crash_on_the_last_step_is_termination_not_truncation(oval):
 
 
 def test_same_seed_same_episode_and_different_seed_different_episode(track):
-    run = jax.jit(lambda k, w: rollout(ENV, random_policy, k, w, PARAMS, 300))
+    run = jax.jit(lambda k, w: rollout(ENV, RANDOM, k, w, PARAMS, 300))
     (first, traj_a), (second, traj_b), (_, traj_c) = run(KEY, track), run(KEY, track), run(jax.random.key(1), track)
     np.testing.assert_array_equal(traj_a["state"].position, traj_b["state"].position)
     assert float(first.episode_return) == float(second.episode_return)
@@ -106,7 +107,7 @@ def test_same_seed_same_episode_and_different_seed_different_episode(track):
 
 def test_jit_vmap_over_different_worlds_matches_one_by_one(tracks):
     keys = jax.random.split(KEY, 8)
-    run = lambda k, w: episode_metrics(rollout(ENV, random_policy, k, w, PARAMS, 60)[0])  # noqa: E731
+    run = lambda k, w: episode_metrics(rollout(ENV, RANDOM, k, w, PARAMS, 60)[0])  # noqa: E731
     batched = jax.jit(jax.vmap(run))(keys, tracks)
     run_one = jax.jit(run)
     for i in range(8):
@@ -120,7 +121,7 @@ def test_reference_driver_laps_most_tracks():
     from worldagent.envs.racing.tracks import generate_tracks
 
     worlds = generate_tracks(np.arange(100, 132))
-    run = jax.jit(jax.vmap(lambda k, w: episode_metrics(rollout(ENV, driver_policy(PARAMS), k, w, PARAMS, 300)[0])))
+    run = jax.jit(jax.vmap(lambda k, w: episode_metrics(rollout(ENV, DRIVER, k, w, PARAMS, 300)[0])))
     metrics = run(jax.random.split(KEY, 32), worlds)
     assert float(np.mean(metrics["lap_completed"])) >= 0.9
     assert float(np.mean(metrics["crashed"])) <= 0.1

@@ -65,30 +65,58 @@ def case(request) -> Case:
     return Case(spec, env, short(params, STEPS), spec.generate(np.arange(BATCH)))
 
 
+def episode(env, random_action, key, world, params):
+    """A random-action episode of ``STEPS`` steps (not frozen at its end: only the first end is checked).
+
+    The keys: ``key -> (steps, reset)``; step t: ``steps[t] -> (act, env)``.
+    """
+    key_steps, key_reset = jax.random.split(key)
+    obs, state = env.reset(key_reset, world, params)
+
+    def one(state, key):
+        key_act, key_env = jax.random.split(key)
+        action = random_action(key_act)
+        obs, state, reward, terminated, truncated, _ = env.step(key_env, state, action, params)
+        return state, {"obs": obs, "action": action, "reward": reward, "terminated": terminated, "truncated": truncated}
+
+    final, steps = jax.lax.scan(one, state, jax.random.split(key_steps, STEPS))
+    return {"obs0": obs, "final": final, **steps}
+
+
 @dataclasses.dataclass(frozen=True)
 class Jitted:
-    """The env's functions jitted once per environment (compiling dominates these tests)."""
+    """The env's functions jitted once per environment (compiling dominates these tests).
 
+    Attributes:
+        episodes: ``(keys[B], worlds[B], params) -> episode`` under jit and vmap.
+        reset, step: one world, jitted.
+        autoreset: ``core.step_autoreset`` with a ``next_world``, jitted.
+    """
+
+    episodes: object
     reset: object
     step: object
-    batch_reset: object
-    batch_step: object
-    rollout: object
     autoreset: object
 
 
 @pytest.fixture(scope="module")
 def jitted(case) -> Jitted:
     env = case.env
-    policy = registry.ScriptedPolicy(None, lambda params, obs, key, state: case.random_action(key))
     return Jitted(
+        episodes=jax.jit(jax.vmap(lambda key, world, params: episode(env, case.random_action, key, world, params), in_axes=(0, 0, None))),
         reset=jax.jit(env.reset),
         step=jax.jit(env.step),
-        batch_reset=jax.jit(jax.vmap(env.reset, in_axes=(0, 0, None))),
-        batch_step=jax.jit(jax.vmap(env.step, in_axes=(0, 0, 0, None))),
-        rollout=jax.jit(lambda key, world, params: core.rollout(env, policy, key, world, params, STEPS)),
         autoreset=jax.jit(lambda key, state, action, params, next_world: core.step_autoreset(env, key, state, action, params, next_world)),
     )
+
+
+@pytest.fixture(scope="module")
+def played(case, jitted) -> dict:
+    """``BATCH`` random episodes, one per world, as numpy (keys: ``KEYS``)."""
+    return jax.tree_util.tree_map(np.asarray, jitted.episodes(KEYS, case.worlds, case.params))
+
+
+KEYS = jax.random.split(jax.random.key(0), BATCH)
 
 
 def assert_trees_equal(a, b):
@@ -107,47 +135,39 @@ def test_generator_is_deterministic_and_its_worlds_are_accepted(case):
     assert len({bytes(row) for row in np.asarray(cells)}) > 1, "different seeds should give different worlds"
 
 
-def test_reset_and_step_under_jit_and_vmap_over_different_worlds(case, jitted):
-    keys = jax.random.split(jax.random.key(0), (3, BATCH))
-    obs, state = jitted.batch_reset(keys[0], case.worlds, case.params)
-    assert obs.shape == (BATCH, *case.action_shape, *case.env.observation_shape)
-    actions = jax.vmap(case.random_action)(keys[1])
-    next_obs, next_state, reward, terminated, truncated, info = jitted.batch_step(keys[2], state, actions, case.params)
-    assert next_obs.shape == obs.shape and next_obs.dtype == obs.dtype
+def test_reset_and_step_under_jit_and_vmap_over_different_worlds(case, jitted, played):
+    agents = case.action_shape
+    assert played["obs0"].shape == (BATCH, *agents, *case.env.observation_shape)
+    assert played["obs"].shape == (BATCH, STEPS, *agents, *case.env.observation_shape)
+    assert played["obs"].dtype == played["obs0"].dtype
     declared = getattr(case.env, "observation_dtype", None)
     if declared is not None:
-        assert obs.dtype == jnp.dtype(declared)
-    per_agent = (BATCH, *case.action_shape)
-    assert reward.shape == per_agent and terminated.shape == per_agent and truncated.shape == per_agent
-    assert terminated.dtype == jnp.bool_ and truncated.dtype == jnp.bool_
-    assert isinstance(info, dict)
-    # The batch is the worlds one by one (vmap walks over them) and they differ.
-    one_obs, one_state = jitted.reset(keys[0, 1], case.world(1), case.params)
-    np.testing.assert_allclose(np.asarray(obs[1]), np.asarray(one_obs), rtol=1e-6)
-    one = jitted.step(keys[2, 1], one_state, actions[1], case.params)
-    np.testing.assert_allclose(np.asarray(next_obs[1]), np.asarray(one[0]), rtol=1e-5, atol=1e-6)
-    assert any(not np.array_equal(np.asarray(obs[0]), np.asarray(obs[i])) for i in range(1, BATCH))
+        assert played["obs0"].dtype == jnp.dtype(declared)
+    for name in ("reward", "terminated", "truncated"):
+        assert played[name].shape == (BATCH, STEPS, *agents), name
+    assert played["terminated"].dtype == np.bool_ and played["truncated"].dtype == np.bool_
+    assert any(not np.array_equal(played["obs0"][0], played["obs0"][i]) for i in range(1, BATCH)), "the worlds differ"
+    # vmap walks over the worlds: world 1 played alone, unbatched, is the batch's row 1.
+    key_steps, key_reset = jax.random.split(KEYS[1])
+    obs, state = jitted.reset(key_reset, case.world(1), case.params)
+    key_act, key_env = jax.random.split(jax.random.split(key_steps, STEPS)[0])
+    step_obs, _, reward, *_ = jitted.step(key_env, state, case.random_action(key_act), case.params)
+    np.testing.assert_allclose(np.asarray(obs), played["obs0"][1], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(step_obs), played["obs"][1, 0], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(reward), played["reward"][1, 0], rtol=1e-5, atol=1e-6)
 
 
-def test_same_key_same_episode(case, jitted):
-    first = jitted.rollout(jax.random.key(7), case.world(0), case.params)
-    again = jitted.rollout(jax.random.key(7), case.world(0), case.params)
-    assert_trees_equal(first, again)
-    assert_trees_equal(case.env.metrics(first[0]), case.env.metrics(again[0]))
+def test_same_key_same_episode(case, jitted, played):
+    again = jax.tree_util.tree_map(np.asarray, jitted.episodes(KEYS, case.worlds, case.params))
+    assert_trees_equal(played, again)
+    other = jax.tree_util.tree_map(np.asarray, jitted.episodes(jax.random.split(jax.random.key(1), BATCH), case.worlds, case.params))
+    assert not np.array_equal(played["action"], other["action"]), "another key, another episode"
 
 
-def test_truncated_exactly_at_the_step_limit_unless_terminated(case):
-    def run(key, world):
-        obs, state = case.env.reset(key, world, case.params)
-
-        def one(state, key):
-            _, state, _, terminated, truncated, _ = case.env.step(key, state, case.random_action(key), case.params)
-            return state, (jnp.any(terminated), jnp.any(truncated))
-
-        return jax.lax.scan(one, state, jax.random.split(key, STEPS))[1]
-
-    terminated, truncated = jax.jit(jax.vmap(run))(jax.random.split(jax.random.key(3), BATCH), case.worlds)
-    terminated, truncated = np.asarray(terminated), np.asarray(truncated)  # [BATCH, STEPS]
+def test_truncated_exactly_at_the_step_limit_unless_terminated(played):
+    terminated, truncated = played["terminated"], played["truncated"]
+    if terminated.ndim > 2:  # multi-agent: an episode ends for everybody at once
+        terminated, truncated = terminated.any(axis=-1), truncated.any(axis=-1)
     truncations = 0
     for ends, cuts in zip(terminated, truncated):
         first_end = int(np.argmax(ends | cuts)) if (ends | cuts).any() else STEPS
@@ -162,20 +182,19 @@ def test_truncated_exactly_at_the_step_limit_unless_terminated(case):
 
 def test_autoreset_onto_next_world(case, jitted):
     world, next_world = case.world(0), case.world(1)
-    autoreset = jitted.autoreset
     obs, state = jitted.reset(jax.random.key(0), world, case.params)
     action = case.random_action(jax.random.key(1))
     key = jax.random.key(2)
     # A limit of one step ends the episode at once: the new episode starts on next_world.
     ended = short(case.params, 1)
-    new_obs, new_state, *_ = autoreset(key, state, action, ended, next_world)
+    new_obs, new_state, *_ = jitted.autoreset(key, state, action, ended, next_world)
     fresh_obs, fresh_state = jitted.reset(jax.random.split(key)[1], next_world, ended)
     np.testing.assert_allclose(np.asarray(new_obs), np.asarray(fresh_obs), rtol=1e-6)
     assert_trees_equal(new_state.world, fresh_state.world)
     assert_trees_equal(new_state.replace(world=None), fresh_state.replace(world=None))
     # An episode that goes on stays on its world (the next world is ignored).
     long = short(case.params, 100)
-    going_obs, going_state, _, terminated, truncated, _ = autoreset(key, state, action, long, next_world)
+    going_obs, going_state, _, terminated, truncated, _ = jitted.autoreset(key, state, action, long, next_world)
     if not np.any(terminated) and not np.any(truncated):
         assert_trees_equal(going_state.world, state.world)
         stepped_obs = jitted.step(jax.random.split(key)[0], state, action, long)[0]
@@ -218,16 +237,17 @@ def test_cells_are_binary_with_the_declared_shape(case):
     assert cells.dtype == np.uint8 and np.isin(cells, (0, 1)).all()
 
 
-def test_metrics_are_declared(case, jitted):
+def test_metrics_are_declared(case, jitted, played):
     declared = case.spec.metrics
     assert declared.resolve("reward") == declared.main and declared.main in declared.names
     _, state = jitted.reset(jax.random.key(0), case.world(0), case.params)
-    final, _ = jitted.rollout(jax.random.key(1), case.world(0), case.params)
+    final = jax.tree_util.tree_map(lambda leaf: leaf[0], played["final"])
     for metrics in (case.env.metrics(state), case.env.metrics(final)):
         # Per-agent breakdowns (harvest's "returns" f32[N]) feed pictures, not searches: allowed undeclared.
         per_agent = {name for name, value in metrics.items() if case.action_shape and np.shape(value) == case.action_shape}
         assert set(metrics) - per_agent <= set(declared.names)
         derived = declared.with_derived({name: np.asarray(value)[None] for name, value in metrics.items()}, case.params)
+        assert all(np.all(np.isfinite(np.asarray(value, np.float64))) for value in derived.values())
         assert set(derived) - per_agent <= set(declared.names)
     assert {declared.resolve(alias) for alias in declared.aliases} <= set(declared.names)
     assert set(declared.compared) | set(declared.highlighted) <= set(declared.names)

@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
 
 from worldagent.worlds.dataset import make_dataset
 from worldagent.worlds.generator import build_generator
 from worldagent.worlds.vae import VAEConfig, train_vae
+
+# ``import toy_env`` (the toy environment of tests/toy_env) under any --import-mode.
+if str(Path(__file__).parent) not in sys.path:
+    sys.path.insert(0, str(Path(__file__).parent))
 
 # Small but long enough for the latent to be used: on 512 harvest maps a VAE needs a few hundred
 # updates before it beats the mean image (fewer, and the posterior has not left the prior yet).

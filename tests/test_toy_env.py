@@ -2,8 +2,9 @@
 and registered through the public API only, runs every phase of worldagent with no edit to it.
 
 Two routes: the library (dataset -> generator -> train -> random / strategic search ->
-influence, each a call into ``worldagent.experiments``), and ``reproduce`` of the tiny preset
-with its report, which must hold a toy section with numbers.
+influence, each a call into ``worldagent.experiments``), in the default run; and ``reproduce``
+of the tiny preset with its report, which must hold a toy section with numbers (``-m slow``:
+the pipeline's own machinery is tested on racing in ``tests/reproduce``).
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ def test_library_route_train_search_strategic_influence(toy, toy_generator, tmp_
     assert summary, "influence returned nothing"
 
 
+@pytest.mark.slow  # ~1 min on 2 idle cores; the library route above runs every phase of the toy in the default run
 def test_reproduce_tiny_has_a_toy_report_section(toy, tmp_path):
     from worldagent.reproduce.pipeline import reproduce
     from worldagent.reproduce.presets import get_preset

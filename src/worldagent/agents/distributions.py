@@ -157,7 +157,7 @@ def world_distribution(
     """Build a world distribution on the host from a spec string.
 
     Args:
-        env: the environment, a name ("racing") or an ``EnvSpec``.
+        env: the environment, a registered name or an ``EnvSpec``.
         spec_text: ``"generator"``: the procedural generator, a uniform pool of ``size`` worlds from
             seeds ``seed, seed+1, ...``; ``"vae"``: ``G(z)``, ``z ~ N(0, I)``, from the generator
             directory ``generator_dir`` (a directory holding ``generator.json`` may also be given

@@ -38,7 +38,7 @@ class SavedPolicy:
         module: the Flax module (rebuilt from its config).
         kind: network architecture name.
         algorithm: "ppo", "acktr", "dqn", ...
-        env: "racing" or "harvest".
+        env: the registered environment's name.
         obs_shape: one agent's observation shape.
         num_actions: A.
         num_agents: agents stacked on the parameters' leading axis (1: no agent axis).
@@ -92,7 +92,7 @@ def save_policy(
         params: its parameters; with ``num_agents > 1``, stacked on a leading agent axis.
         kind: its architecture name in ``networks.NETWORKS`` ("actor_critic", "q_network", ...).
         algorithm: the training algorithm ("ppo", "acktr", "dqn").
-        env: "racing" or "harvest".
+        env: the registered environment's name.
         obs_shape: one agent's observation shape.
         num_actions: A.
         num_agents: agents stacked in ``params`` (1 for a single agent).

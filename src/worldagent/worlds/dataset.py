@@ -3,7 +3,7 @@
 A dataset file is one ``.npz`` (loaded with ``allow_pickle=False``) holding::
 
     format_version  int, FORMAT_VERSION
-    env             str, the registered environment's name ("racing", "harvest", ...)
+    env             str, the registered environment's name (see ``registry.names()``)
     seeds           int64[N], the generator seed of each world
     cells           uint8[N, D], each world's binary VAE input (``EnvSpec.cells``)
     cell_shape      int[...], the shape of one world's cells before flattening

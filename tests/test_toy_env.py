@@ -1,10 +1,10 @@
 """Proof of extensibility (issue 11, item 7): a third environment, defined in ``tests/toy_env``
 and registered through the public API only, runs every phase of worldagent with no edit to it.
 
-Two routes: the library (dataset -> generator -> train -> random / strategic search ->
-influence, each a call into ``worldagent.experiments``), in the default run; and ``reproduce``
-of the tiny preset with its report, which must hold a toy section with numbers (``-m slow``:
-the pipeline's own machinery is tested on racing in ``tests/reproduce``).
+Two routes: ``reproduce`` of the tiny preset (dataset, generator, agent, random, strategic,
+influence) with its report, which must hold a toy section with numbers (the default run, ~30 s
+on 2 idle cores); and the library, each phase a direct call into ``worldagent.experiments``
+(``-m slow``: the same phases again, through the API a notebook would use).
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ def test_the_toy_is_registered_through_the_public_api_only(toy):
         registry.register(toy_env.SPEC.__class__(**{**vars(toy_env.SPEC)}))  # a second "toy" is refused
 
 
+@pytest.mark.slow  # the reproduce route below builds and uses the toy's generator in the default run
 def test_generator_makes_valid_toy_worlds(toy, toy_generator):
     generator, _ = toy_generator
     assert generator.env == toy.name
@@ -57,6 +58,7 @@ def test_generator_makes_valid_toy_worlds(toy, toy_generator):
         env.check_world(jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[index]), worlds))
 
 
+@pytest.mark.slow  # ~30 s on 2 idle cores; the reproduce route below runs the same phases in the default run
 def test_library_route_train_search_strategic_influence(toy, toy_generator, tmp_path):
     from worldagent import experiments
     from worldagent.agents.algorithms import training_config
@@ -91,7 +93,6 @@ def test_library_route_train_search_strategic_influence(toy, toy_generator, tmp_
     assert summary, "influence returned nothing"
 
 
-@pytest.mark.slow  # ~1 min on 2 idle cores; the library route above runs every phase of the toy in the default run
 def test_reproduce_tiny_has_a_toy_report_section(toy, tmp_path):
     from worldagent.reproduce.pipeline import reproduce
     from worldagent.reproduce.presets import get_preset

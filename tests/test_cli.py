@@ -130,13 +130,32 @@ def test_search_and_random_evaluation_commands(tmp_path, racing_vae, racing_data
 def test_train_commands_write_an_agent_that_search_can_load(tmp_path):
     from worldagent.agents.loaders import load_agent
     from worldagent.envs import registry
+    from worldagent.worlds.dataset import make_dataset
 
+    worlds = {env: make_dataset(env, 16, 0, progress=False).save(tmp_path / f"{env}.npz") for env in ("racing", "harvest")}
     run = tmp_path / "ppo"
-    result = runner.invoke(app, ["train", "racing", "--episodes", "40", "--out", str(run), "--quiet"])  # ppo: racing's default
+    result = runner.invoke(
+        app, ["train", "racing", "--episodes", "40", "--worlds", str(worlds["racing"]), "--out", str(run), "--quiet"]
+    )  # ppo: racing's default
     assert result.exit_code == 0, result.output
     assert "trained ppo" in result.output
     assert (run / "curve.csv").exists() and (run / "curve.png").exists() and (run / "policy" / "policy.json").exists()
-    result = runner.invoke(app, ["train", "harvest", "--episodes", "8", "--option", "tagger=0", "--out", str(tmp_path / "dqn"), "--quiet"])
+    result = runner.invoke(
+        app,
+        [
+            "train",
+            "harvest",
+            "--episodes",
+            "8",
+            "--option",
+            "tagger=0",
+            "--worlds",
+            str(worlds["harvest"]),
+            "--out",
+            str(tmp_path / "dqn"),
+            "--quiet",
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert load_agent(registry.get("racing"), str(run)).params is not None
     assert load_agent(registry.get("harvest"), str(tmp_path / "dqn")).params is not None

@@ -195,6 +195,7 @@ def train(
     *,
     seed: int = 0,
     options: dict | None = None,
+    params: Any = None,
     progress: bool = True,
     resume: bool = True,
     distribution_spec: str = "",
@@ -212,6 +213,8 @@ def train(
             ``curve.png`` and, at the end, the agent in ``policy/``.
         seed: the run's seed (becomes the PRNG key here).
         options: the env's options (e.g. harvest ``{"tagger": (0,)}``).
+        params: the env params to train under (default: those ``spec.make_env(options)`` gives);
+            an experiment passes the params it evaluates with, so both see the same env.
         progress: show a progress bar (episodes).
         resume: continue from ``out_dir``'s checkpoint if there is one (it must be the same
             algorithm, env, options, config and seed); otherwise start afresh (overwriting it).
@@ -238,6 +241,7 @@ def train(
     if resuming:
         _check_resumable(out_dir, run)
     env, env_params = spec.make_env(options)
+    env_params = env_params if params is None else params
     trainer = algorithm.make_train(config, env, env_params, distribution)
     state = trainer.init(jax.random.key(seed))
     rows, resumed_from = [], None

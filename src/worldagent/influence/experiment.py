@@ -57,7 +57,9 @@ def evaluate_campaign(store, campaign, objective, env, policy, G, params, repeat
     return run_campaign(store, campaign, evaluate, resume=True, progress=progress)
 
 
-def train_agent(out: Path, spec, algo: str, config: Any, distribution: Any, seed: int, options: Any, described: str, progress: bool) -> dict:
+def train_agent(
+    out: Path, spec, algo: str, config: Any, distribution: Any, seed: int, options: Any, params: Any, described: str, progress: bool
+) -> dict:
     """Train one agent into ``out`` (resuming its checkpoint), or return the record of a finished one.
 
     A finished agent is marked by ``trained.json`` (written after the trainer returns), so a
@@ -69,7 +71,17 @@ def train_agent(out: Path, spec, algo: str, config: Any, distribution: Any, seed
     if marker.is_file():
         return json.loads(marker.read_text())
     result = train(
-        spec, algo, config, distribution, out, seed=int(seed), options=options, progress=progress, resume=True, distribution_spec=described
+        spec,
+        algo,
+        config,
+        distribution,
+        out,
+        seed=int(seed),
+        options=options,
+        params=params,
+        progress=progress,
+        resume=True,
+        distribution_spec=described,
     )
     record = {"policy": "policy", "episodes": result.episodes, "env_steps": result.env_steps, "wall_seconds": round(result.wall_seconds, 3)}
     write_text(marker, json.dumps({**record, "seed": int(seed), "distribution": described}, indent=1))
@@ -261,7 +273,7 @@ def influence(
             run_dir, "training", {"selection": selection.describe(), "algo": algo, "training": training, "greedy": bool(greedy), "options": options}
         )
         save_influenced_worlds(run_dir / WORLDS_FILE, spec, worlds, latents, values)
-        agents, timings["train"] = train_all(run_dir, spec, algo, config, G, worlds, selection, seeds, options, progress)
+        agents, timings["train"] = train_all(run_dir, spec, algo, config, G, worlds, selection, seeds, options, params, progress)
         clock = time.perf_counter()
         agent_dirs = {name: run_dir / "agents" / name / record["policy"] for name, record in agents.items()}
         per_seed = compare_agents(store, spec, env, params, G, trained_policies(agent_dirs, spec, greedy), counts, progress)
@@ -290,7 +302,7 @@ def influence(
     return result
 
 
-def train_all(run_dir: Path, spec, algo: str, config, G, worlds, selection: Selection, seeds: list[int], options, progress: bool):
+def train_all(run_dir: Path, spec, algo: str, config, G, worlds, selection: Selection, seeds: list[int], options, params, progress: bool):
     """Step (c): one default and one influenced agent per seed, same algorithm, budget and seed; (records, timings)."""
     from worldagent.agents.distributions import LatentWorlds, WorldPool
 
@@ -304,6 +316,6 @@ def train_all(run_dir: Path, spec, algo: str, config, G, worlds, selection: Sele
         for label in LABELS:
             name, clock = f"{label}-s{s}", time.perf_counter()
             distribution, described = distributions[label]
-            agents[name] = train_agent(run_dir / "agents" / name, spec, algo, config, distribution, s, options, described, progress)
+            agents[name] = train_agent(run_dir / "agents" / name, spec, algo, config, distribution, s, options, params, described, progress)
             timings[name] = time.perf_counter() - clock
     return agents, timings

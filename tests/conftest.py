@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -25,7 +27,9 @@ if str(Path(__file__).parent) not in sys.path:
 # Many tests compile the same programs (an evaluator, a trainer) from fresh Python closures; a
 # compilation cache for this session compiles each once. It starts empty every run, so CI timings
 # stay honest.
-jax.config.update("jax_compilation_cache_dir", tempfile.mkdtemp(prefix="worldagent-jax-cache-"))
+CACHE_DIR = tempfile.mkdtemp(prefix="worldagent-jax-cache-")
+atexit.register(shutil.rmtree, CACHE_DIR, ignore_errors=True)
+jax.config.update("jax_compilation_cache_dir", CACHE_DIR)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 

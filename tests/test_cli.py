@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
@@ -127,37 +128,34 @@ def test_search_and_random_evaluation_commands(tmp_path, racing_vae, racing_data
     assert bad.exit_code == 2 and "no metric 'speed'" in bad.output
 
 
-def test_train_commands_write_an_agent_that_search_can_load(tmp_path):
-    from worldagent.agents.loaders import load_agent
-    from worldagent.envs import registry
+def _small_worlds(env, path):
     from worldagent.worlds.dataset import make_dataset
 
-    worlds = {env: make_dataset(env, 16, 0, progress=False).save(tmp_path / f"{env}.npz") for env in ("racing", "harvest")}
+    return make_dataset(env, 16, 0, progress=False).save(path)
+
+
+def test_train_writes_an_agent_that_search_can_load(tmp_path):
+    from worldagent.agents.loaders import load_agent
+    from worldagent.envs import registry
+
     run = tmp_path / "ppo"
-    result = runner.invoke(
-        app, ["train", "racing", "--episodes", "40", "--worlds", str(worlds["racing"]), "--out", str(run), "--quiet"]
-    )  # ppo: racing's default
+    worlds = _small_worlds("racing", tmp_path / "racing.npz")
+    result = runner.invoke(app, ["train", "racing", "--episodes", "40", "--worlds", str(worlds), "--out", str(run), "--quiet"])
     assert result.exit_code == 0, result.output
-    assert "trained ppo" in result.output
+    assert "trained ppo" in result.output  # racing's default algorithm
     assert (run / "curve.csv").exists() and (run / "curve.png").exists() and (run / "policy" / "policy.json").exists()
-    result = runner.invoke(
-        app,
-        [
-            "train",
-            "harvest",
-            "--episodes",
-            "8",
-            "--option",
-            "tagger=0",
-            "--worlds",
-            str(worlds["harvest"]),
-            "--out",
-            str(tmp_path / "dqn"),
-            "--quiet",
-        ],
-    )
-    assert result.exit_code == 0, result.output
     assert load_agent(registry.get("racing"), str(run)).params is not None
+
+
+@pytest.mark.slow  # the same command as above, with DQN (trained in tests/agents) and an env option
+def test_train_harvest_with_a_tagger(tmp_path):
+    from worldagent.agents.loaders import load_agent
+    from worldagent.envs import registry
+
+    worlds = _small_worlds("harvest", tmp_path / "harvest.npz")
+    args = ["train", "harvest", "--episodes", "8", "--option", "tagger=0", "--worlds", str(worlds), "--out", str(tmp_path / "dqn"), "--quiet"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
     assert load_agent(registry.get("harvest"), str(tmp_path / "dqn")).params is not None
 
 

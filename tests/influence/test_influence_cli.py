@@ -45,6 +45,7 @@ def test_other_bad_options_exit_2(tmp_path):
         assert result.exit_code == 2 and message in result.output, result.output
 
 
+@pytest.mark.slow  # the experiment itself runs in test_experiment.py; this is its CLI wrapper end to end
 def test_a_whole_racing_run_prints_the_table_and_writes_figure_and_json(tmp_path, racing_vae, racing_data, racing_generator):
     from worldagent.worlds.generator import save_generator
 

@@ -30,6 +30,7 @@ from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.files import write_atomically, write_bytes
 from worldagent.progress import progress_bar
+from worldagent.provenance import device, versions
 
 CHECKPOINT_FILE = "checkpoint.msgpack"
 RUN_FILE = "run.json"
@@ -60,16 +61,6 @@ class TrainResult:
     env_steps: int
     wall_seconds: float
     resumed_from_update: int | None
-
-
-def versions() -> dict:
-    """Versions of the packages a run depends on (recorded in ``run.json``)."""
-    import flax
-    import optax
-
-    import worldagent
-
-    return {"worldagent": getattr(worldagent, "__version__", "?"), "jax": jax.__version__, "flax": flax.__version__, "optax": optax.__version__}
 
 
 def _read_curve(path: Path) -> list[dict]:
@@ -174,7 +165,7 @@ def _run_record(spec, algo: str, config, options: dict, seed: int, distribution_
         "config": config.to_dict(),
         "distribution": distribution_spec,
     }
-    return {**json.loads(json.dumps(record)), "versions": versions(), "device": str(jax.devices()[0].device_kind)}
+    return {**json.loads(json.dumps(record)), "versions": versions(), "device": device()}
 
 
 def _check_inputs(algorithm, config, distribution, seed) -> None:

@@ -17,42 +17,16 @@ config differs from the preset's is refused (never silently reused): the fix is
 from __future__ import annotations
 
 import json
-import platform
 import time
 from pathlib import Path
 from typing import Any
 
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
+from worldagent.provenance import device, versions
 
 MANIFEST_FILE = "manifest.json"
 FORMAT_VERSION = 1
-
-
-def versions() -> dict:
-    """Versions of the packages whose behaviour the results depend on."""
-    import flax
-    import jax
-    import numpy
-    import optax
-
-    import worldagent
-
-    return {
-        "worldagent": worldagent.__version__,
-        "jax": jax.__version__,
-        "flax": flax.__version__,
-        "optax": optax.__version__,
-        "numpy": numpy.__version__,
-        "python": platform.python_version(),
-    }
-
-
-def device() -> str:
-    """The JAX devices the run used, e.g. ``"cpu:0 (cpu)"``."""
-    import jax
-
-    return ", ".join(f"{d} ({d.device_kind})" for d in jax.devices())
 
 
 def phase_key(env: str | None, phase: str) -> str:

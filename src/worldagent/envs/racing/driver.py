@@ -57,8 +57,3 @@ def driver_action(state: RacingState, params: RacingParams, driver: DriverParams
     coasting = (1.0 - params.friction) * state.velocity
     gap = speed * heading - coasting
     return jnp.argmax(jnp.asarray(ACTION_DIRECTIONS) @ gap).astype(jnp.int32)
-
-
-def driver_policy(params: RacingParams = RacingParams(), driver: DriverParams = DriverParams()):
-    """The driver as a ``policy(key, obs, state) -> action`` for ``core.rollout``."""
-    return lambda key, obs, state: driver_action(state, params, driver)

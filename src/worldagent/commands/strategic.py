@@ -51,7 +51,7 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from worldagent import experiments
-        from worldagent.reports.strategic import strategic_figure
+        from worldagent.reports.strategic import draw_strategic
         from worldagent.store import RunStore
 
         check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
@@ -62,18 +62,7 @@ def register(app: typer.Typer) -> None:
             found = experiments.strategic_evaluation(store, setup, metric, budget=budget, seed=seed, optimiser=optimiser, progress=not quiet)
         scores = np.array([e.score for e in randoms])
         low, high = found["min"], found["max"]
-        figure = strategic_figure(
-            setup.spec,
-            setup.env,
-            setup.policy,
-            setup.params,
-            low,
-            high,
-            scores,
-            metric,
-            out / f"strategic-{metric}-s{seed}.png",
-            key=found.get("keys"),
-        )
+        figure = draw_strategic(setup, found, scores, metric, out / f"strategic-{metric}-s{seed}.png")
         console.print(
             f"{env} {metric}: min {low.score:.4g}{experiments.episode_note(setup.spec, low)}; max {high.score:.4g}{experiments.episode_note(setup.spec, high)}; "
             f"random mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g}, {len(scores)} worlds) -> {figure}"

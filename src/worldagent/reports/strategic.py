@@ -175,3 +175,10 @@ def strategic_figure(
     path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png"))
     plt.close(figure)
     return path
+
+
+def draw_strategic(setup: Any, result: dict, random_scores, metric: str, out: Path | str) -> Path:
+    """``strategic_figure`` of an ``experiments.strategic_evaluation`` result, for its ``experiments.Setup``."""
+    return strategic_figure(
+        setup.spec, setup.env, setup.policy, setup.params, result["min"], result["max"], random_scores, metric, out, key=result.get("keys")
+    )

@@ -240,7 +240,7 @@ def random_scores(ctx: EnvContext) -> np.ndarray:
 def strategic_phase(ctx: EnvContext) -> dict:
     """CMA-ES searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b)."""
     from worldagent import experiments
-    from worldagent.reports.strategic import strategic_figure
+    from worldagent.reports.strategic import draw_strategic
 
     setup = ctx.setup()
     with ctx.store() as store:
@@ -248,18 +248,7 @@ def strategic_phase(ctx: EnvContext) -> dict:
             store, setup, ctx.metric, budget=ctx.budgets.strategic_budget, seed=ctx.seed, optimiser="cmaes", progress=ctx.progress, resume=True
         )
     low, high = result["min"], result["max"]
-    figure = strategic_figure(
-        setup.spec,
-        setup.env,
-        setup.policy,
-        setup.params,
-        low,
-        high,
-        random_scores(ctx),
-        ctx.metric,
-        ctx.layout.figure("strategic"),
-        key=result.get("keys"),
-    )
+    figure = draw_strategic(setup, result, random_scores(ctx), ctx.metric, ctx.layout.figure("strategic"))
     return {
         "store": ctx.layout.rel(ctx.layout.store_path),
         "campaigns": list(result["campaigns"]),

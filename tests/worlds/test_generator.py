@@ -11,6 +11,7 @@ import pytest
 
 from worldagent.envs import registry
 from worldagent.envs.harvest.repair import HarvestRepair
+from worldagent.envs.harvest.world import index_maps
 from worldagent.envs.repairs import NearestWorld
 from worldagent.errors import WorldagentError
 from worldagent.worlds.generator import build_generator, load_generator, save_generator
@@ -51,8 +52,10 @@ def test_harvest_generator_maps_are_valid_with_the_median_apple_count(harvest_ge
     maps = harvest_generator(jax.random.normal(jax.random.key(4), (32, harvest_generator.latent_dim)))
     counts = np.asarray(maps.apples).reshape(32, -1).sum(1)
     median = int(np.median(harvest_data.worlds.apples.reshape(len(harvest_data), -1).sum(1)))
-    assert (counts == median).all() and harvest_generator.repair.config == {"apples": median}
+    assert (counts == median).all() and harvest_generator.repair.config == {"apples": median, "walls": "nearest"}
     maps.validate()
+    layouts = {row.tobytes() for row in harvest_data.worlds.walls.reshape(len(harvest_data), -1)}
+    assert all(row.tobytes() in layouts for row in np.asarray(maps.walls).reshape(32, -1))  # walls snap to the dataset's rooms
 
 
 def test_repair_config_sets_the_apple_count_and_is_checked(harvest_vae, harvest_data):
@@ -99,13 +102,13 @@ def test_save_and_load_give_the_same_generator(tmp_path, racing_vae, racing_data
 def test_the_repair_config_survives_save_and_load_and_old_files_load(tmp_path, harvest_vae, harvest_data):
     dataset_path = harvest_data.save(tmp_path / "data.npz")
     save_generator(tmp_path / "g", harvest_vae, dataset_path, build_generator(harvest_vae, harvest_data, repair_config={"apples": 9}))
-    assert load_generator(tmp_path / "g")[0].repair.config == {"apples": 9}
+    assert load_generator(tmp_path / "g")[0].repair.config == {"apples": 9, "walls": "nearest"}
     meta = json.loads((tmp_path / "g" / "generator.json").read_text())
     del meta["repair"]
     median = build_generator(harvest_vae, harvest_data).repair.apples
     for apples, expected in ((11, 11), (0, median)):  # old files recorded "apples": K, or 0 for the default
         (tmp_path / "g" / "generator.json").write_text(json.dumps({**meta, "apples": apples}))
-        assert load_generator(tmp_path / "g")[0].repair.config == {"apples": expected}
+        assert load_generator(tmp_path / "g")[0].repair.config == {"apples": expected, "walls": "nearest"}
 
 
 def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_generator, harvest_data):
@@ -121,6 +124,11 @@ def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_g
     assert 0.0 <= harvest["self_mapping_rate"] <= 1.0
     assert harvest["distinct_layouts"] >= 1 and harvest["mean_cell_hamming"] >= 0.0
     assert 0.0 <= harvest["coverage_fraction"] <= 1.0
+    separated = harvest["structure"]["tagger_separated"]
+    describe = registry.get("harvest").metrics.descriptors["tagger_separated"]
+    assert separated["dataset"] == pytest.approx(np.mean([describe(index_maps(harvest_data.worlds, i)) for i in range(len(harvest_data))]))
+    assert 0.0 <= separated["generator"] <= 1.0 and set(harvest["structure"]) == set(registry.get("harvest").metrics.descriptors)
+    assert set(racing["structure"]) == {"total_curvature", "sharpest_corner", "track_length"}
     with pytest.raises(WorldagentError, match="at least 1"):
         figures(harvest_generator, harvest_data, 0, jax.random.key(0))
 

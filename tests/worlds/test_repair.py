@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from worldagent.envs.harvest.repair import HarvestRepair, repair_maps
+from worldagent.envs.harvest.spec import tagger_isolated
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
 from worldagent.envs.repairs import NearestWorld, nearest_index
 from worldagent.errors import WorldagentError
@@ -46,8 +47,10 @@ def test_nearest_world_returns_the_dataset_worlds_under_jit(racing_data):
 def test_harvest_repair_from_a_dataset(harvest_data):
     default = HarvestRepair.from_dataset(harvest_data, {})
     median = int(np.median(harvest_data.worlds.apples.reshape(len(harvest_data), -1).sum(1)))
-    assert default.config == {"apples": median} and default.grid == (SIZE, SIZE)
-    assert HarvestRepair.from_dataset(harvest_data, default.config) == default
+    assert default.config == {"apples": median, "walls": "nearest"} and default.grid == (SIZE, SIZE)
+    again = HarvestRepair.from_dataset(harvest_data, default.config)
+    assert again.config == default.config and np.array_equal(again.layouts, default.layouts)
+    assert len(default.layouts) == len(np.unique(harvest_data.worlds.walls.reshape(len(harvest_data), -1), axis=0))
     logits = jax.random.normal(jax.random.key(2), (4, 2 * SIZE * SIZE))  # flat, as the decoder gives them
     maps = jax.jit(lambda fix, logits: fix(logits))(HarvestRepair.from_dataset(harvest_data, {"apples": 12}), logits)
     for i in range(4):
@@ -96,3 +99,39 @@ def test_repair_batches():
     for i in range(6):
         single = repair(logits[i], 20)
         np.testing.assert_array_equal(batched.apples[i], single.apples)
+
+
+def test_harvest_walls_snap_to_the_most_probable_dataset_layout(harvest_data):
+    fix = HarvestRepair.from_dataset(harvest_data, {"apples": 12})
+    walls = harvest_data.worlds.walls.reshape(len(harvest_data), -1).astype(np.float32)
+    chosen = [3, 0, 77]
+    logits = np.zeros((3, 2, SIZE * SIZE), np.float32)
+    logits[:, 0] = 6.0 * (2.0 * walls[chosen] - 1.0)  # a dataset layout, as confident logits
+    logits[:, 0] += np.random.default_rng(0).normal(0.0, 1.0, logits[:, 0].shape)  # blurred
+    maps = jax.jit(lambda fix, logits: fix(logits))(fix, jnp.asarray(logits.reshape(3, -1)))
+    np.testing.assert_array_equal(np.asarray(maps.walls).reshape(3, -1), walls[chosen] > 0)
+    for i in range(3):
+        assert_valid_with_k_apples(maps.walls[i], maps.apples[i], 12)
+
+
+def test_a_gappy_wall_snaps_to_the_closed_room_not_the_open_map():
+    """Thresholding a wall the decoder is unsure of leaves gaps; snapping restores the room."""
+    room = HarvestMap.from_str("\n".join(["....#" + "." * (SIZE - 5)] * 4 + ["#####" + "." * (SIZE - 5)] + ["." * SIZE] * (SIZE - 5)))
+    open_map = HarvestMap(walls=np.zeros((SIZE, SIZE), bool), apples=np.zeros((SIZE, SIZE), bool))
+    layouts = jnp.asarray(np.stack([room.walls, open_map.walls]).reshape(2, -1).astype(np.float32))
+    wall_logit = np.where(room.walls, 2.0, -4.0)
+    wall_logit[4, 1] = wall_logit[2, 4] = -0.5  # two unsure wall cells: thresholding opens the room
+    logits = jnp.asarray(np.stack([wall_logit, np.zeros((SIZE, SIZE))]))
+    thresholded, snapped = repair(logits, 5), repair_maps(logits, 5, layouts)
+    assert tagger_isolated(room) == 1.0 and tagger_isolated(thresholded) == 0.0  # the gaps open the room
+    np.testing.assert_array_equal(snapped.walls, room.walls)
+
+
+def test_harvest_repair_config_is_checked_and_threshold_mode_kept(harvest_data):
+    threshold = HarvestRepair.from_dataset(harvest_data, {"walls": "threshold"})
+    assert threshold.layouts is None and threshold.config["walls"] == "threshold"
+    assert HarvestRepair.from_dataset(harvest_data, threshold.config) == threshold
+    with pytest.raises(WorldagentError, match="walls='curvy'; pick one of nearest, threshold"):
+        HarvestRepair.from_dataset(harvest_data, {"walls": "curvy"})
+    with pytest.raises(WorldagentError, match=r"unknown harvest repair setting\(s\) \['colour'\]"):
+        HarvestRepair.from_dataset(harvest_data, {"colour": 1})

@@ -66,6 +66,15 @@ def quality_figures(directory: Path, samples: int, seed: int) -> dict:
     }
 
 
+def structure_table(structure: dict) -> str:
+    """Lines comparing each descriptor's mean over G(z) with the dataset's."""
+    lines = ["structure (mean over worlds)   G(z)      dataset   relative difference"]
+    for name, row in structure.items():
+        difference = "n/a" if row["relative_difference"] is None else f"{row['relative_difference']:+.1%}"
+        lines.append(f"  {name:<28} {row['generator']:<9.4g} {row['dataset']:<9.4g} {difference}")
+    return "\n".join(lines)
+
+
 def register(app: typer.Typer) -> None:
     """Add ``worldagent generator`` and its subcommands."""
     group = typer.Typer(help="Train, draw and assess the world generator G(z) (a VAE + repair).", no_args_is_help=True)
@@ -79,7 +88,7 @@ def register(app: typer.Typer) -> None:
         dataset_path: Path = typer.Option(None, "--dataset", help="Dataset file; default: OUT/dataset.npz, made if missing."),
         n: int = typer.Option(10_000, "--n", help="Worlds in a dataset made here."),
         seed: int = typer.Option(0, "--seed", help="First generator seed of a dataset made here."),
-        epochs: int = typer.Option(25, "--epochs", help="Training epochs."),
+        epochs: int = typer.Option(None, "--epochs", help="Training epochs (default: the env's paper preset, e.g. racing 25, harvest 100)."),
         beta: float = typer.Option(1.0, "--beta", help="Weight of the KL term of the ELBO."),
         latent: int = typer.Option(10, "--latent", help="Latent dimensions (the paper: 10)."),
         learning_rate: float = typer.Option(1e-3, "--lr", help="Adam step size."),
@@ -93,6 +102,8 @@ def register(app: typer.Typer) -> None:
 
         registry.get(env)  # an unknown environment fails before anything is written
         settings = repair_settings(repair)
+        if epochs is None:
+            epochs = registry.get(env).presets.get("paper", {}).get("vae_epochs", VAEConfig.epochs)
         config = VAEConfig(latent_dim=latent, beta=beta, learning_rate=learning_rate, batch_size=batch_size, epochs=epochs)
         config.validate()
         vae = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet)
@@ -133,3 +144,4 @@ def register(app: typer.Typer) -> None:
         figures = quality_figures(directory, samples, seed)
         write_text(directory / QUALITY_FILE, json.dumps(figures, indent=1))
         typer.echo(json.dumps(figures, indent=1))
+        typer.echo(structure_table(figures[figures["env"]]["structure"]))

@@ -7,7 +7,9 @@
   themselves), coverage (how many distinct worlds G reaches from z ~ N(0, I), and which share of
   the dataset's worlds it reproduces), validity of
   G(z) after repair and, where the spec has a ``raw_decode``, before it, and the diversity of
-  the samples' cells (distinct layouts, mean pairwise Hamming distance).
+  the samples' cells (distinct layouts, mean pairwise Hamming distance);
+- ``structure``: each of the environment's descriptors (e.g. harvest's share of maps whose walls
+  cut the tagger off from another agent) over G(z) samples against the dataset.
 
 Worlds are compared by their cells (``EnvSpec.cells``), so nothing here depends on the
 environment: racing's nearest-track repair and harvest's apple-count repair get the same figures.
@@ -27,6 +29,7 @@ from worldagent.worlds.generator import Generator
 
 BATCH = 1000  # worlds per jitted call
 HAMMING_PAIRS = 10_000  # sample pairs for the mean Hamming distance
+STRUCTURE_WORLDS = 2000  # worlds of each side whose descriptors are compared (computed on the host, one by one)
 
 
 def _batched(fn, array, *args):
@@ -129,6 +132,26 @@ def _diversity(cells: np.ndarray, dataset_cells: np.ndarray) -> dict:
     }
 
 
+def structure(spec, generated, count: int, dataset: WorldDataset) -> dict:
+    """Each of the spec's descriptors (``Metrics.descriptors``) averaged over G(z) samples and over the dataset.
+
+    A generator can match cells on average and still break what matters about a world (a wall
+    with a gap encloses nothing); the descriptors measure such structure. Up to
+    ``STRUCTURE_WORLDS`` worlds of each side.
+
+    Returns:
+        ``{name: {"generator": mean, "dataset": mean, "relative_difference": (g - d) / d or None}}``.
+    """
+    count = min(count, STRUCTURE_WORLDS)
+    reference = min(len(dataset), STRUCTURE_WORLDS)
+    out = {}
+    for name, describe in spec.metrics.descriptors.items():
+        ours = float(np.mean([describe(world) for world in _each(generated, count)]))
+        theirs = float(np.mean([describe(world) for world in _each(dataset.worlds, reference)]))
+        out[name] = {"generator": ours, "dataset": theirs, "relative_difference": (ours - theirs) / theirs if theirs else None}
+    return out
+
+
 def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.Array) -> dict:
     """Self-mapping over the dataset; coverage, validity and diversity of ``samples`` draws z ~ N(0, I).
 
@@ -143,7 +166,8 @@ def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.
         ``coverage_fraction`` (the share of dataset worlds some sample equals), ``most_reached_share`` (the commonest sample's
         share), ``validity_after_repair``, ``validity_before_repair`` (only when the spec has a
         ``raw_decode``), ``distinct_layouts``, ``mean_cell_hamming`` (between random sample
-        pairs) and ``samples``.
+        pairs), ``structure`` (``structure``: the spec's descriptors, G(z) against the dataset)
+        and ``samples``.
     """
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
         raise WorldagentError(f"samples={samples!r}; draw at least 1 latent.")
@@ -157,8 +181,10 @@ def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.
         valid_after.append(_valid_each(chunk, count))
         if spec.raw_decode is not None:
             valid_before.append(_valid_each(spec.raw_decode(np.asarray(logits)), count))
-    cells = np.asarray(spec.cells(_concat(worlds)), np.uint8)
+    worlds = _concat(worlds)
+    cells = np.asarray(spec.cells(worlds), np.uint8)
     result = {"self_mapping_rate": _self_mapping_rate(generator, dataset, spec), **_diversity(cells, dataset.cells)}
+    result["structure"] = structure(spec, worlds, samples, dataset)
     result["validity_after_repair"] = float(np.concatenate(valid_after).mean())
     if valid_before:
         result["validity_before_repair"] = float(np.concatenate(valid_before).mean())

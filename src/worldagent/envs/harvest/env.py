@@ -39,6 +39,7 @@ from worldagent.errors import WorldagentError
 NUM_AGENTS = 4
 NOOP, FORWARD, BACKWARD, LEFT, RIGHT, ROTATE_LEFT, ROTATE_RIGHT, TAG = range(8)
 NUM_ACTIONS = 8
+VIEW_SIZE, VIEW_BEHIND, BEAM_LENGTH = 15, 2, 5  # defaults of ``Harvest``; their sources are in its docstring
 ACTION_NAMES = ("noop", "forward", "backward", "left", "right", "rotate_left", "rotate_right", "tag")
 NUM_CHANNELS = 4  # walls, apples, other agents, tagged-out flag
 WALL_BIT, APPLE_BIT, AGENT_BIT, TAGGED_OUT_BIT = (np.uint8(1 << c) for c in range(NUM_CHANNELS))  # cell codes, bit c = channel c
@@ -282,9 +283,9 @@ class Harvest(Environment):
     """
 
     num_agents: int = NUM_AGENTS
-    view_size: int = 15
-    view_behind: int = 2
-    beam_length: int = 5
+    view_size: int = VIEW_SIZE
+    view_behind: int = VIEW_BEHIND
+    beam_length: int = BEAM_LENGTH
 
     def __post_init__(self):
         if self.num_agents != NUM_AGENTS:

@@ -1,9 +1,18 @@
 """Harvest's repair step: decoded cell logits -> a valid map (paper §5.2.1).
 
-Walls where the wall logit is positive; the spawn corners always free; exactly K apples on the
-K free cells with the highest apple logits (the paper keeps the number of resources the same
-across worlds). If fewer than K non-corner cells are free, the walls with the lowest logits are
-cleared to make room, so any input yields a valid map.
+Walls. By default (``walls="nearest"``) the wall grid is the dataset's wall layout the decoder
+finds most probable (``envs.repairs.nearest_index``, racing's rule applied to the wall channel
+alone). The decoder's wall channel is blurry: a wall line it is unsure of comes out as a row of
+logits near zero, and thresholding them (``walls="threshold"``) leaves broken walls that
+enclose nothing. Snapping to a dataset layout keeps the procedural generator's closed rooms,
+so worlds in which walls cut the tagger off from the others (the paper's Figure 8b) occur as
+often in G(z) as the decoder's wall signal allows. Measured with ``worldagent generator report``
+(``structure.tagger_separated``); numbers in ``docs/harvest.md``.
+
+Apples. Exactly K apples on the K free cells with the highest apple logits (the paper keeps the
+number of resources the same across worlds); the spawn corners are always free. If fewer than K
+non-corner cells are free, the walls with the lowest logits are cleared to make room, so any
+input yields a valid map.
 """
 
 from __future__ import annotations
@@ -14,28 +23,43 @@ import numpy as np
 from flax import struct
 
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
+from worldagent.envs.repairs import nearest_index
 from worldagent.errors import WorldagentError
 
 LOGIT_CLIP = 1e4  # keeps the priorities below apart from the wall offset
 WALL_OFFSET = 1e6
+WALL_RULES = ("nearest", "threshold")
 
 
-def repair_maps(logits: jax.Array, apples: int) -> HarvestMap:
+def corner_mask(height: int, width: int) -> np.ndarray:
+    """bool[H, W]: the four spawn corners."""
+    mask = np.zeros((height, width), bool)
+    mask[tuple(spawn_corners(height, width).T)] = True
+    return mask
+
+
+def repair_maps(logits: jax.Array, apples: int, layouts: jax.Array | None = None) -> HarvestMap:
     """Valid maps with exactly ``apples`` apples and free spawn corners from decoded logits.
 
     Args:
         logits: f32[2, H, W] (or [B, 2, H, W]) wall and apple logits.
         apples: K, the number of apples every map gets.
+        layouts: f32[L, H·W] 0/1 wall layouts to snap the walls to (the most probable one under
+            the wall logits); None: walls where the wall logit is positive.
 
     Returns:
         ``HarvestMap`` with bool walls and apples of shape [H, W] (or [B, H, W]).
     """
     if logits.ndim == 4:
-        return jax.vmap(lambda one: repair_maps(one, apples))(logits)
+        return jax.vmap(lambda one: repair_maps(one, apples, layouts))(logits)
     wall_logit, apple_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP), jnp.clip(logits[1], -LOGIT_CLIP, LOGIT_CLIP)
     height, width = wall_logit.shape
-    corners = jnp.zeros((height, width), bool).at[tuple(spawn_corners(height, width).T)].set(True)
-    walls = (wall_logit > 0) & ~corners
+    if layouts is None:
+        walls = wall_logit > 0
+    else:
+        walls = layouts[nearest_index(wall_logit.reshape(1, -1), layouts)[0]].reshape(height, width) > 0.5
+    corners = jnp.asarray(corner_mask(height, width))
+    walls = walls & ~corners
     # Free cells first, by apple logit; then wall cells, least confident walls first; never corners.
     priority = jnp.where(walls, -WALL_OFFSET - wall_logit, apple_logit)
     priority = jnp.where(corners, -jnp.inf, priority).reshape(-1)
@@ -56,33 +80,52 @@ def median_apples(worlds: HarvestMap) -> int:
     return int(np.median(apples.reshape(len(apples), -1).sum(axis=1)))
 
 
+def wall_layouts(worlds: HarvestMap) -> np.ndarray:
+    """f32[L, H·W]: the distinct wall grids of a batch of maps, 0/1."""
+    walls = np.asarray(worlds.walls, bool)
+    return np.unique(walls.reshape(len(walls), -1), axis=0).astype(np.float32)
+
+
 @struct.dataclass
 class HarvestRepair:
-    """G's repair for harvest: exactly ``apples`` apples, free spawn corners (static fields).
+    """G's repair for harvest: snapped (or thresholded) walls, exactly ``apples`` apples, free spawn corners.
 
     Attributes:
-        apples: K, the apple count of every generated map.
-        grid: (H, W) of the maps.
+        layouts: f32[L, H·W] the dataset's distinct wall layouts (``walls="nearest"``), or None.
+        apples: K, the apple count of every generated map (static).
+        grid: (H, W) of the maps (static).
     """
 
+    layouts: jax.Array | None
     apples: int = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> HarvestRepair:
-        """The repair for maps like ``dataset``'s; ``config["apples"]`` K (default: the dataset's median)."""
+        """The repair for maps like ``dataset``'s.
+
+        ``config``: ``apples`` K (default: the dataset's median count); ``walls`` "nearest"
+        (default: the dataset layout the decoder finds most probable) or "threshold".
+        """
         config = dict(config or {})
+        unknown = set(config) - {"apples", "walls"}
+        if unknown:
+            raise WorldagentError(f"unknown harvest repair setting(s) {sorted(unknown)}; use apples=K and walls=nearest|threshold.")
         grid = tuple(int(s) for s in dataset.cell_shape[1:])
         count = config.get("apples") or median_apples(dataset.worlds)
         free = int(np.prod(grid)) - 4
         if not 1 <= int(count) <= free:
             raise WorldagentError(f"apples={count}; pick between 1 and {free} (the non-corner cells of the map).")
-        return cls(int(count), grid)
+        rule = config.get("walls", "nearest")
+        if rule not in WALL_RULES:
+            raise WorldagentError(f"walls={rule!r}; pick one of {', '.join(WALL_RULES)}.")
+        layouts = jnp.asarray(wall_layouts(dataset.worlds)) if rule == "nearest" else None
+        return cls(layouts, int(count), grid)
 
     @property
     def config(self) -> dict:
-        return {"apples": self.apples}
+        return {"apples": self.apples, "walls": "threshold" if self.layouts is None else "nearest"}
 
     def __call__(self, logits: jax.Array) -> HarvestMap:
         """Valid maps from decoded logits f32[B, 2·H·W]."""
-        return repair_maps(logits.reshape(-1, 2, *self.grid), self.apples)
+        return repair_maps(logits.reshape(-1, 2, *self.grid), self.apples, self.layouts)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from worldagent.envs.harvest.env import NUM_AGENTS
+from worldagent.envs.harvest.env import BEAM_LENGTH, NUM_AGENTS, VIEW_BEHIND, VIEW_SIZE
 from worldagent.envs.harvest.repair import HarvestRepair, threshold_maps
 from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
@@ -30,12 +30,35 @@ def taggers(value) -> tuple[int, ...]:
     return tuple(int(i) for i in chosen)
 
 
+def positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise ValueError(f"{value} is not a positive integer")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise ValueError(f"{value} is negative")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise ValueError(f"{value} is not a non-negative number")
+    return value
+
+
 def make(options):
-    """``Harvest()`` and params in which the agents of ``options["tagger"]`` may TAG (paper §6.2.2)."""
-    from worldagent.envs.harvest.env import Harvest, make_params
+    """``Harvest`` and params from the options: who may TAG (paper §6.2.2), the window, the beam, regrowth."""
+    from worldagent.envs.harvest.env import Harvest, make_params, perolat_regrowth_table
 
     chosen = taggers(options.get("tagger"))
-    return Harvest(), make_params(can_tag=[i in chosen for i in range(NUM_AGENTS)])
+    env = Harvest(view_size=options["view_size"], view_behind=options["view_behind"], beam_length=options["beam_length"])
+    regrowth = np.minimum(1.0, options["regrowth"] * perolat_regrowth_table())
+    return env, make_params(can_tag=[i in chosen for i in range(NUM_AGENTS)], regrowth_probability=regrowth)
 
 
 def generate(seeds):
@@ -56,14 +79,24 @@ def wall_share(world) -> float:
     return float(np.asarray(world.walls, bool).mean())
 
 
-def tagger_isolated(world) -> float:
-    """1.0 when walls cut agent 0's corner off from every other corner (paper Figure 8b), else 0.0."""
+def cut_off_from_tagger(world) -> np.ndarray:
+    """bool[3]: whether walls cut agent 0's corner off from each other agent's (4-connected moves)."""
     from scipy.ndimage import label
 
     walls = np.asarray(world.walls, bool)
     regions, _ = label(~walls)
-    corners = [regions[r, c] for r, c in spawn_corners(*walls.shape)]
-    return float(all(corner != corners[0] for corner in corners[1:]))
+    corners = np.array([regions[r, c] for r, c in spawn_corners(*walls.shape)])
+    return corners[1:] != corners[0]
+
+
+def tagger_isolated(world) -> float:
+    """1.0 when walls cut agent 0's corner off from every other corner (paper Figure 8b), else 0.0."""
+    return float(cut_off_from_tagger(world).all())
+
+
+def tagger_separated(world) -> float:
+    """1.0 when walls cut agent 0's corner off from at least one other corner, else 0.0."""
+    return float(cut_off_from_tagger(world).any())
 
 
 def apple_clustering(world) -> float:
@@ -126,7 +159,13 @@ SPEC = register(
         name="harvest",
         description="Resource Harvest (paper §5.1.2): four agents gather regrowing apples; one may TAG the others out.",
         make=make,
-        options=(EnvOption("tagger", "agents allowed to TAG, e.g. 0 or 0,2 (the paper's influencing experiment: 0)", parse_tagger, ()),),
+        options=(
+            EnvOption("tagger", "agents allowed to TAG, e.g. 0 or 0,2 (the paper's influencing experiment: 0)", parse_tagger, ()),
+            EnvOption("view_size", "side of each agent's square window, cells (odd)", positive_int, VIEW_SIZE),
+            EnvOption("view_behind", "rows of the window behind the agent; the rest are ahead", non_negative_int, VIEW_BEHIND),
+            EnvOption("beam_length", "reach of the TAG beam, cells", positive_int, BEAM_LENGTH),
+            EnvOption("regrowth", "multiplier on Perolat's regrowth probabilities (below 1: scarcer apples)", non_negative_float, 1.0),
+        ),
         world_type=HarvestMap,
         generate=generate,
         cells=cells,
@@ -137,7 +176,12 @@ SPEC = register(
             names=("group_reward", "conflict", "equality", "sustainability", "peace"),
             compared=("group_reward", "conflict", "equality"),
             highlighted=("conflict", "equality"),
-            descriptors={"wall_share": wall_share, "tagger_isolated": tagger_isolated, "apple_clustering": apple_clustering},
+            descriptors={
+                "wall_share": wall_share,
+                "tagger_separated": tagger_separated,
+                "tagger_isolated": tagger_isolated,
+                "apple_clustering": apple_clustering,
+            },
             default_descriptors=("wall_share", "apple_clustering"),
         ),
         trace=trace,
@@ -147,7 +191,7 @@ SPEC = register(
         presets={
             "paper": _budgets(
                 worlds=10_000,
-                vae_epochs=25,
+                vae_epochs=100,  # walls come out sharp enough to snap to closed rooms (docs/harvest.md)
                 episodes=5_000,
                 random_worlds=1_000,
                 strategic_budget=1_050,
@@ -162,7 +206,7 @@ SPEC = register(
             ),
             "quick": _budgets(
                 worlds=5_000,
-                vae_epochs=10,
+                vae_epochs=100,
                 episodes=1_000,
                 random_worlds=200,
                 strategic_budget=105,

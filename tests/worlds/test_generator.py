@@ -11,7 +11,7 @@ import pytest
 
 from worldagent.envs import registry
 from worldagent.envs.harvest.repair import HarvestRepair
-from worldagent.envs.harvest.world import index_maps
+from worldagent.envs.harvest.world import DEFAULT_SIZE, index_maps
 from worldagent.envs.repairs import NearestWorld
 from worldagent.errors import WorldagentError
 from worldagent.worlds.generator import build_generator, load_generator, save_generator
@@ -35,7 +35,7 @@ def test_generator_is_repair_of_the_decoded_logits(harvest_generator):
     direct = harvest_generator.repair(harvest_generator.logits(z))
     for name in vars(direct):
         np.testing.assert_array_equal(getattr(harvest_generator(z), name), getattr(direct, name))
-    assert harvest_generator.env == "harvest" and harvest_generator.cell_shape == (2, 25, 25)
+    assert harvest_generator.env == "harvest" and harvest_generator.cell_shape == (2, DEFAULT_SIZE, DEFAULT_SIZE)
 
 
 def test_racing_generator_returns_dataset_tracks(racing_generator, racing_data):
@@ -62,7 +62,7 @@ def test_repair_config_sets_the_apple_count_and_is_checked(harvest_vae, harvest_
     generator = build_generator(harvest_vae, harvest_data, repair_config={"apples": 7})
     maps = generator(jnp.zeros((3, generator.latent_dim)))
     assert (np.asarray(maps.apples).reshape(3, -1).sum(1) == 7).all()
-    for bad in (-1, 25 * 25):
+    for bad in (-1, DEFAULT_SIZE * DEFAULT_SIZE):
         with pytest.raises(WorldagentError, match="apples="):
             build_generator(harvest_vae, harvest_data, repair_config={"apples": bad})
 

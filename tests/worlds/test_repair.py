@@ -11,11 +11,11 @@ from hypothesis import strategies as st
 
 from worldagent.envs.harvest.repair import HarvestRepair, repair_maps
 from worldagent.envs.harvest.spec import tagger_isolated
-from worldagent.envs.harvest.world import HarvestMap, spawn_corners
+from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
 from worldagent.envs.repairs import NearestWorld, nearest_index
 from worldagent.errors import WorldagentError
 
-SIZE = 25
+SIZE = DEFAULT_SIZE
 repair = jax.jit(repair_maps, static_argnums=1)
 
 
@@ -55,7 +55,7 @@ def test_harvest_repair_from_a_dataset(harvest_data):
     maps = jax.jit(lambda fix, logits: fix(logits))(HarvestRepair.from_dataset(harvest_data, {"apples": 12}), logits)
     for i in range(4):
         assert_valid_with_k_apples(maps.walls[i], maps.apples[i], 12)
-    with pytest.raises(WorldagentError, match="apples=10000; pick between 1 and 621"):
+    with pytest.raises(WorldagentError, match=f"apples=10000; pick between 1 and {SIZE * SIZE - 4}"):
         HarvestRepair.from_dataset(harvest_data, {"apples": 10_000})
 
 

@@ -41,7 +41,7 @@ def tag_params():
 
 @pytest.fixture(scope="session")
 def generated_maps():
-    """64 generated 25x25 maps, seeds 0..63."""
+    """64 generated maps (DEFAULT_SIZE square), seeds 0..63."""
     return generate_maps(seeds_from(0, 64))
 
 

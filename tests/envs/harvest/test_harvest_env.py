@@ -24,7 +24,7 @@ from worldagent.envs.harvest.env import (
     shift_sum,
 )
 from worldagent.envs.harvest.policies import random_act
-from worldagent.envs.harvest.world import HarvestMap, index_maps
+from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, index_maps
 from worldagent.errors import WorldagentError
 
 N, E, S, W = range(4)
@@ -55,7 +55,8 @@ def test_reset_puts_agents_at_their_corners(env, reset_fn, generated_maps):
     world = index_maps(generated_maps, 0)
     obs, state = reset_fn(jax.random.key(0), world, env.default_params)
     assert obs.shape == (4, 15, 15, 4) and obs.dtype == jnp.uint8
-    assert state.position.tolist() == [[0, 0], [0, 24], [24, 0], [24, 24]]
+    last = DEFAULT_SIZE - 1
+    assert state.position.tolist() == [[0, 0], [0, last], [last, 0], [last, last]]
     assert state.heading.tolist() == [S, S, N, N]
     np.testing.assert_array_equal(state.apples, world.apples)
 

@@ -8,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from worldagent.envs.harvest.maps import MapConfig, generate_layout, generate_maps, seeds_from
-from worldagent.envs.harvest.world import index_maps, spawn_corners
+from worldagent.envs.harvest.world import DEFAULT_SIZE, index_maps, spawn_corners
 from worldagent.errors import WorldagentError
 
 FOUR_NEIGHBOURS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]])
@@ -36,8 +36,8 @@ def test_same_seed_same_map_whatever_the_batch(generated_maps):
 
 
 def test_maps_are_valid_with_free_spawn_corners(generated_maps):
-    assert generated_maps.walls.shape == (64, 25, 25)
-    rows, cols = spawn_corners(25, 25).T
+    assert generated_maps.walls.shape == (64, DEFAULT_SIZE, DEFAULT_SIZE)
+    rows, cols = spawn_corners(DEFAULT_SIZE, DEFAULT_SIZE).T
     assert not generated_maps.walls[:, rows, cols].any()
     assert not generated_maps.apples[:, rows, cols].any()
     assert not (generated_maps.walls & generated_maps.apples).any()
@@ -58,7 +58,8 @@ def test_walls_border_each_region(layouts):
     union = closed.group_masks.any(axis=1)
     assert not (closed.walls & ~union).any()  # walls only on regions
     padded = np.pad(union, ((0, 0), (1, 1), (1, 1)), constant_values=True)
-    ring = [padded[:, 1 + dr : 26 + dr, 1 + dc : 26 + dc] for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+    size = union.shape[-1]
+    ring = [padded[:, 1 + dr : 1 + size + dr, 1 + dc : 1 + size + dc] for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
     np.testing.assert_array_equal(closed.walls, union & ~np.all(ring, axis=0))  # exactly the border
 
 

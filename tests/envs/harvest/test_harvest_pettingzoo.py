@@ -8,7 +8,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from worldagent.envs.harvest.env import Harvest, make_params
 from worldagent.envs.harvest.pettingzoo_env import HarvestParallelEnv
-from worldagent.envs.harvest.world import HarvestMap
+from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap
 from worldagent.errors import WorldagentError
 
 SHORT = make_params(can_tag=[True, False, False, False], max_steps=60)
@@ -69,4 +69,4 @@ def test_rgb_render():
     env = make_env(render_mode="rgb_array")
     env.reset(seed=0)
     frame = env.render()
-    assert frame.shape == (25 * 16, 25 * 16, 3) and frame.dtype == np.uint8
+    assert frame.shape == (DEFAULT_SIZE * 16, DEFAULT_SIZE * 16, 3) and frame.dtype == np.uint8

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from worldagent.cli import app
 from worldagent.envs.harvest import render
-from worldagent.envs.harvest.world import HarvestMap, index_maps
+from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, index_maps
 
 runner = CliRunner()
 WORLD = HarvestMap.from_str(
@@ -54,9 +54,9 @@ def test_worlds_command_draws_a_sheet_of_maps(tmp_path, generated_maps):
     assert result.exit_code == 0, result.output
     with Image.open(out) as image:
         sheet = np.asarray(image.convert("RGB"))
-    assert image.size == (2 * (25 * 8 + 4) + 4,) * 2
+    assert image.size == (2 * (DEFAULT_SIZE * 8 + 4) + 4,) * 2
     first = np.asarray(render.draw_map(index_maps(generated_maps, 0), cell=8))
-    np.testing.assert_array_equal(sheet[4 : 4 + 200, 4 : 4 + 200], first)  # seed 0 in the top-left tile
+    np.testing.assert_array_equal(sheet[4 : 4 + 8 * DEFAULT_SIZE, 4 : 4 + 8 * DEFAULT_SIZE], first)  # seed 0 in the top-left tile
 
 
 def test_worlds_command_bad_count_is_one_line(tmp_path):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from worldagent import experiments
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.trajectories import replay
 from worldagent.experiments import compare_optimisers, random_evaluation, setup, strategic_evaluation
@@ -30,7 +31,12 @@ def test_setup_resolves_env_agent_and_generator(racing, racing_generator, harves
     assert racing.spec.name == "racing" and racing.policy.name == "driver" and racing.generator is racing_generator
     assert racing.metric("reward") == "return" and racing.metric("crash_rate") == "crashed"
     harvest = setup("harvest", "random", harvest_generator, options={"tagger": (0,)})
-    assert harvest.options == {"tagger": (0,)} and bool(harvest.params.can_tag[0]) and harvest.repeats == 8
+    assert (
+        harvest.options == registry.get("harvest").check_options({"tagger": (0,)})
+        and harvest.options["tagger"] == (0,)
+        and bool(harvest.params.can_tag[0])
+        and harvest.repeats == 8
+    )
     with pytest.raises(WorldagentError, match="makes racing worlds; pass a harvest generator"):
         setup("harvest", "random", racing_generator)
     with pytest.raises(WorldagentError, match="unknown environment 'boats'"):

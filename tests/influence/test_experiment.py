@@ -177,7 +177,7 @@ def test_harvest_with_a_search_for_more_worlds_and_figure_8(tmp_path, harvest_ge
     assert result["worlds"]["campaigns"] == ["influence-candidates", "influence-search"]
     assert result["worlds"]["tried"] == 16 + 21  # CMA-ES evaluates whole generations of 21
     assert result["metrics"] == ["group_reward", "conflict", "equality"]
-    assert result["config"]["options"] == {"tagger": [0]}
+    assert result["config"]["options"] == {"tagger": [0], "view_size": 15, "view_behind": 2, "beam_length": 5, "regrowth": 1.0}  # defaults filled in
     assert math.isnan(result["summary"]["equality"]["default"]["ci95"])
     assert json.loads((tmp_path / "influence.json").read_text())["summary"]["equality"]["default"]["ci95"] is None
     assert (tmp_path / "agents" / "default-s0" / "policy").is_dir()

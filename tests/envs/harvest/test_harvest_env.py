@@ -355,3 +355,20 @@ def test_bad_input_is_a_one_line_error(env, open_map):
         Harvest(view_size=14)
     env.check_action(np.array([0, 7, 3, 1]))
     env.check_world(open_map)
+
+
+def test_options_set_the_window_the_beam_and_regrowth():
+    from worldagent.envs import registry
+    from worldagent.envs.harvest.env import perolat_regrowth_table
+    from worldagent.errors import WorldagentError
+
+    spec = registry.get("harvest")
+    env, params = spec.make_env(spec.parse_options(["tagger=0", "view_size=21", "view_behind=0", "beam_length=7", "regrowth=0.5"]))
+    assert (env.view_size, env.view_behind, env.beam_length) == (21, 0, 7) and env.observation_shape == (21, 21, 4)
+    np.testing.assert_allclose(params.regrowth_probability, 0.5 * perolat_regrowth_table())
+    assert params.can_tag.tolist() == [True, False, False, False]
+    _, dense = spec.make_env({"regrowth": 20.0})
+    assert float(dense.regrowth_probability.max()) == 1.0  # probabilities are capped
+    for bad in ("view_size=0", "view_behind=-1", "regrowth=-0.5", "beam_length=x"):
+        with pytest.raises(WorldagentError, match=bad.split("=")[0]):
+            spec.parse_options([bad])

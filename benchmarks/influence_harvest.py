@@ -75,16 +75,21 @@ def given_agents(work: Path, options: dict, episodes: int, progress: bool) -> Pa
     return out
 
 
-def interval(stats: dict) -> list[float]:
-    return [stats["mean"] - stats["ci95"], stats["mean"] + stats["ci95"]]
+def interval(stats: dict) -> list[float] | None:
+    """[low, high] of a mean's 95% interval; None without one (a single seed)."""
+    half = stats.get("ci95")
+    if half is None or not np.isfinite(half):
+        return None
+    return [stats["mean"] - half, stats["mean"] + half]
 
 
 def comparison(summary: dict) -> dict:
-    """Per metric: both intervals and whether they overlap."""
+    """Per metric: both intervals and whether they overlap (None with a single seed)."""
     out = {}
     for metric, by_label in summary.items():
         low, high = interval(by_label["default"]), interval(by_label["influenced"])
-        out[metric] = {"default": low, "influenced": high, "overlap": bool(low[0] <= high[1] and high[0] <= low[1])}
+        overlap = None if low is None or high is None else bool(low[0] <= high[1] and high[0] <= low[1])
+        out[metric] = {"default": low, "influenced": high, "overlap": overlap}
     return out
 
 

@@ -87,3 +87,19 @@ def test_draw_episodes_tints_the_cells_each_agent_visited(generated_maps):
     render.draw_episodes(axis, world, episodes)
     assert len(axis.images) == 2 and axis.get_legend() is not None
     plt.close(figure)
+
+
+def test_reach_tints_only_where_the_tagger_can_walk():
+    world = HarvestMap.from_str(
+        """
+        ..#....
+        ..#....
+        ###....
+        .......
+        ......A
+        """
+    )
+    plain, tinted = (np.asarray(render.draw_map(world, cell=2, agents=False, reach=reach)) for reach in (False, True))
+    inside, outside, apple = tinted[2, 2], tinted[8, 10], tinted[8, 12]  # cell (1, 1), (4, 5), (4, 6)
+    assert tuple(inside) == render.REACH and tuple(outside) == render.BACKGROUND and tuple(apple) == render.APPLE
+    np.testing.assert_array_equal(tinted[4:, 6:], plain[4:, 6:])  # beyond the walls nothing changes

@@ -24,6 +24,7 @@ APPLE = (40, 190, 60)
 AGENT = (220, 40, 40)
 OBSERVER = (40, 90, 230)
 WINDOW = (255, 255, 255)
+REACH = (20, 30, 70)  # dark blue: where the tagger can go
 AGENT_COLOURS = ((0.95, 0.25, 0.25), (0.25, 0.55, 1.0), (1.0, 0.65, 0.1), (0.85, 0.35, 0.95))  # TL, TR, BL, BR (trajectories)
 
 
@@ -84,10 +85,24 @@ def draw_observation(obs: np.ndarray, cell: int = 16) -> Image.Image:
     return image
 
 
-def draw_map(world: HarvestMap, cell: int = 16, agents: bool = True) -> Image.Image:
-    """One (unbatched) map, with the four agents at their spawn corners if ``agents``."""
+def tagger_reach(walls: np.ndarray) -> np.ndarray:
+    """bool[H, W]: the free cells agent 0 (the tagger) can walk to from its corner (4-connected)."""
+    from scipy.ndimage import label
+
+    regions, _ = label(~walls)
+    return regions == regions[0, 0]
+
+
+def draw_map(world: HarvestMap, cell: int = 16, agents: bool = True, reach: bool = False) -> Image.Image:
+    """One (unbatched) map, with the four agents at their spawn corners if ``agents``; ``reach``
+    tints the empty cells the tagger can walk to, so walls that isolate it show (Figure 8b)."""
     walls, apples = np.asarray(world.walls, bool), np.asarray(world.apples, bool)
     image = draw_grid(walls, apples, cell)
+    if reach:
+        tint = np.kron(tagger_reach(walls) & ~apples, np.ones((cell, cell), bool))
+        pixels = np.asarray(image).copy()
+        pixels[tint] = REACH
+        image = Image.fromarray(pixels)
     if agents:
         draw = ImageDraw.Draw(image)
         for agent, (row, col) in enumerate(spawn_corners(*walls.shape)):

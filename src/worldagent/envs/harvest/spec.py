@@ -119,7 +119,7 @@ def world_picture(world, size: int):
 
     from worldagent.envs.harvest.render import draw_map
 
-    image = draw_map(world, cell=max(1, size // np.shape(world.walls)[-1]), agents=True)
+    image = draw_map(world, cell=max(1, size // np.shape(world.walls)[-1]), agents=True, reach=True)
     return image.resize((size, size), Image.NEAREST)
 
 

@@ -25,9 +25,9 @@ import jax.numpy as jnp
 
 from worldagent.agents.kfac import KFAC, KFACConfig
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.ppo import TrainState, max_updates, training_params, update_row
+from worldagent.agents.ppo import TrainState, single_agent_trainer, update_row
 from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
-from worldagent.agents.trainer import Trainer, budgeted_trainer, raw_key
+from worldagent.agents.trainer import Trainer, raw_key
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
 
@@ -132,14 +132,7 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
         ``learning_rate`` is the step size η the trust region allowed and ``approx_kl`` the KL it
         predicts, ``½ η² Δᵀ F̂ Δ``.
     """
-    if not isinstance(config, ACKTRConfig):
-        raise WorldagentError(f"config is a {type(config).__name__}; pass an ACKTRConfig.")
-    if getattr(env, "num_agents", 1) != 1:
-        raise WorldagentError(f"ACKTR trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
-    env_params = training_params(env_params, config.respawn)
-    budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
-    init, update, network = _core(config, env)
-    return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution))
+    return single_agent_trainer("ACKTR", ACKTRConfig, _core, config, env, env_params, distribution)
 
 
 @functools.lru_cache(maxsize=16)

@@ -165,13 +165,19 @@ def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
     Returns:
         A ``trainer.Trainer``; ``train(key)`` is vmappable over keys (seeds).
     """
-    if not isinstance(config, PPOConfig):
-        raise WorldagentError(f"config is a {type(config).__name__}; pass a PPOConfig.")
+    return single_agent_trainer("PPO", PPOConfig, _core, config, env, env_params, distribution)
+
+
+def single_agent_trainer(name: str, config_type: type, core, config, env, env_params, distribution) -> Trainer:
+    """The ``Trainer`` of an actor-critic (PPO, ACKTR) whose ``core(config, env)`` gives
+    ``(init, update, network)``: checks the config and the env, applies ``respawn`` and budgets updates."""
+    if not isinstance(config, config_type):
+        raise WorldagentError(f"config is a {type(config).__name__}; {name} takes its {config_type.__name__}.")
     if getattr(env, "num_agents", 1) != 1:
-        raise WorldagentError(f"PPO trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
+        raise WorldagentError(f"{name} trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
     env_params = training_params(env_params, config.respawn)
     budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
-    init, update, network = _core(config, env)
+    init, update, network = core(config, env)
     return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution))
 
 

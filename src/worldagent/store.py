@@ -92,6 +92,20 @@ def decode_world(blob: bytes) -> dict[str, np.ndarray]:
         return {name: data[name] for name in data.files}
 
 
+def _use_wal(db: sqlite3.Connection, patience: float = 30.0) -> None:
+    """Switch to WAL, retrying: SQLite answers "locked" without waiting when two connections
+    switch a new file at once (the busy timeout does not cover that step)."""
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as error:
+            if "locked" not in str(error) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.01)
+
+
 class RunStore:
     """A SQLite run store (see the module docstring). Use as a context manager or ``close()``."""
 
@@ -106,7 +120,7 @@ class RunStore:
         try:
             self.db = sqlite3.connect(path, timeout=30.0, isolation_level=None)
             self.db.execute("PRAGMA busy_timeout=30000")
-            self.db.execute("PRAGMA journal_mode=WAL")
+            _use_wal(self.db)
             if not self._tables():
                 if not create:
                     raise WorldagentError(f"{path} is an empty file, not a run store; run a campaign there first.")

@@ -111,6 +111,26 @@ def test_two_campaigns_share_a_store_and_readers_run_concurrently(tmp_path):
         assert len(store.evaluations("min")) == 18 and len(store.evaluations("rand")) == 10
 
 
+def test_many_connections_opening_a_new_store_at_once_all_succeed(tmp_path):
+    # SQLite refuses a second simultaneous switch of a new file to WAL without waiting.
+    errors = []
+
+    def open_store(path):
+        try:
+            with RunStore(path) as store:
+                store.evaluations()
+        except Exception as error:  # pragma: no cover - the assertion below reports it
+            errors.append(error)
+
+    for trial in range(40):
+        threads = [threading.Thread(target=open_store, args=(tmp_path / str(trial),)) for _ in range(4)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    assert not errors
+
+
 def test_nan_scores_are_stored_and_reported_not_optimised(tmp_path):
     def broken(z, seeds):
         outcomes = noisy_sphere(z, seeds)

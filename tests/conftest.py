@@ -27,8 +27,11 @@ if str(Path(__file__).parent) not in sys.path:
 # Many tests compile the same programs (an evaluator, a trainer) from fresh Python closures; a
 # compilation cache for this session compiles each once. It starts empty every run, so CI timings
 # stay honest.
-CACHE_DIR = tempfile.mkdtemp(prefix="worldagent-jax-cache-")
-atexit.register(shutil.rmtree, CACHE_DIR, ignore_errors=True)
+# pytest-xdist workers inherit the directory of the process that starts them, and share it.
+if "WORLDAGENT_TEST_JAX_CACHE" not in os.environ:
+    os.environ["WORLDAGENT_TEST_JAX_CACHE"] = tempfile.mkdtemp(prefix="worldagent-jax-cache-")
+    atexit.register(shutil.rmtree, os.environ["WORLDAGENT_TEST_JAX_CACHE"], ignore_errors=True)
+CACHE_DIR = os.environ["WORLDAGENT_TEST_JAX_CACHE"]
 jax.config.update("jax_compilation_cache_dir", CACHE_DIR)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
@@ -36,6 +39,19 @@ jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 # Small but long enough for the latent to be used: on 512 harvest maps a VAE needs a few hundred
 # updates before it beats the mean image (fewer, and the posterior has not left the prior yet).
 SMALL_VAE = VAEConfig(encoder=(128, 64), decoder=(64, 128), epochs=30, batch_size=16, learning_rate=2e-3, warmup_epochs=2)
+
+
+# Folders whose files share an expensive session fixture (a whole reproduce run) run on one worker.
+SHARED_FIXTURE_FOLDERS = ("reproduce",)
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
+def pytest_collection_modifyitems(items):
+    """Put each test file, or each folder of SHARED_FIXTURE_FOLDERS, on one xdist worker."""
+    for item in items:
+        path = item.path.relative_to(Path(__file__).parent)
+        group = path.parts[0] if path.parts[0] in SHARED_FIXTURE_FOLDERS else str(path)
+        item.add_marker(pytest.mark.xdist_group(group))
 
 
 @pytest.fixture(scope="session")

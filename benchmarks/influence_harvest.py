@@ -39,6 +39,7 @@ from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
+from worldagent.influence.cache import load_influenced_worlds  # noqa: E402
 from worldagent.influence.experiment import trained_policies  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator, save_generator  # noqa: E402
@@ -121,6 +122,14 @@ def who_collects_what(influence_dir: Path, setup, count: int) -> dict:
     return {"worlds": count, "repeats": DIAGNOSTIC_REPEATS, "separated_share": round(float(separated.mean()), 4), "agents": rows}
 
 
+def selected_structure(influence_dir: Path) -> dict:
+    """Each descriptor's mean over the selected (influenced) worlds, e.g. how often walls isolate the tagger."""
+    worlds, _, _ = load_influenced_worlds(influence_dir, SPEC)
+    count = len(jax.tree_util.tree_leaves(worlds)[0])
+    each = [jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], worlds) for i in range(count)]
+    return {name: round(float(np.mean([describe(w) for w in each])), 4) for name, describe in SPEC.metrics.descriptors.items()}
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
@@ -170,6 +179,7 @@ def main(argv=None) -> dict:
         "summary": result["summary"],
         "intervals": comparison(result["summary"]),
         "paper": {"conflict": {"default": 0.51, "influenced": 0.05}, "equality": {"default": 0.33, "influenced": 0.78}},
+        "selected_structure": selected_structure(influence_dir),  # against generator_quality's G(z) means
         "who_collects_what": who_collects_what(influence_dir, setup, args.diagnostic_worlds),
         "generator_quality": quality,
         "wall_seconds": round(time.perf_counter() - started, 1),

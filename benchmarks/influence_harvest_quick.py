@@ -6,7 +6,9 @@
 Re-runs only the harvest influence phase of a ``reproduce --preset quick`` run directory, with
 the training episodes, evaluation worlds and seeds given (everything else as the quick preset),
 and adds the per-seed values and means to ``benchmarks/results/influence-harvest-quick.json``
-under the setting's name. A setting already finished in ``--run`` is only recorded.
+under the setting's name, with who collects what (per-agent returns of every trained agent on
+300 random G(z) worlds, split by whether walls cut the tagger off). A setting already finished in
+``--run`` is only recorded.
 """
 
 from __future__ import annotations
@@ -18,7 +20,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
+from influence_harvest import SPEC, selected_structure, who_collects_what  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
+from worldagent import experiments  # noqa: E402
 from worldagent.errors import WorldagentError  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
 from worldagent.reproduce.layout import RunLayout  # noqa: E402
@@ -52,11 +56,14 @@ def main(argv=None) -> dict:
         "influence_seeds": tuple(args.seeds) if args.seeds else tuple(budgets.influence_seeds),
     }
     preset = quick.with_budgets("harvest", **changes)
-    started = time.perf_counter()
-    reproduce(preset, args.run, ["harvest"], restart=[] if influence_done(args.run, preset) else ["influence"], progress=False)
-    result = json.loads(RunLayout(args.run, "harvest").influence_result.read_text())
+    started, already_done = time.perf_counter(), influence_done(args.run, preset)
+    reproduce(preset, args.run, ["harvest"], restart=[] if already_done else ["influence"], progress=False)
+    layout = RunLayout(args.run, "harvest")
+    result = json.loads(layout.influence_result.read_text())
+    setup = experiments.setup(SPEC, str(layout.agent_dir), layout.generator_dir, options=SPEC.check_options(SPEC.reproduce_options))
     name = f"episodes={changes['influence_episodes']},eval_worlds={changes['influence_eval_worlds']},seeds={len(changes['influence_seeds'])}"
     record = json.loads(RESULT.read_text()) if RESULT.is_file() else {"benchmark": "influence-harvest-quick", "settings": {}}
+    earlier = record["settings"].get(name, {})
     record["settings"][name] = {
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "machine": describe_machine(),
@@ -65,7 +72,10 @@ def main(argv=None) -> dict:
         "worlds": result["worlds"],
         "per_seed": result["per_seed"],
         "summary": result["summary"],
-        "wall_seconds": round(time.perf_counter() - started, 1),
+        "who_collects_what": who_collects_what(layout.influence_dir, setup, 300),
+        "selected_structure": selected_structure(layout.influence_dir),
+        # a setting finished before keeps the wall time of the run that trained it
+        "wall_seconds": earlier.get("wall_seconds") if already_done and earlier else round(time.perf_counter() - started, 1),
     }
     write_text(RESULT, json.dumps(record, indent=2) + "\n")
     for metric, by_label in result["summary"].items():

@@ -23,6 +23,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from worldagent.agents.policy import agent_record
 from worldagent.envs import registry
 from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
@@ -84,6 +85,7 @@ class Setup:
         generator: G(z) of ``spec``'s worlds.
         repeats: episodes per world (the paper: 8).
         options: the env options (checked, defaults filled in).
+        backend: where campaigns evaluate their world batches (``evaluation.backends``; None: here).
     """
 
     spec: EnvSpec
@@ -93,6 +95,7 @@ class Setup:
     generator: Any
     repeats: int = 8
     options: Mapping[str, Any] = field(default_factory=dict)
+    backend: Any = None
 
     def metric(self, name: str) -> str:
         """The canonical metric for ``name`` ("reward": the env's main one); unknown names are refused."""
@@ -100,18 +103,29 @@ class Setup:
 
 
 def setup(
-    env: str | EnvSpec, agent: Any, generator: Path | str | Any, *, options: Mapping[str, Any] | None = None, greedy: bool = False, repeats: int = 8
+    env: str | EnvSpec,
+    agent: Any,
+    generator: Path | str | Any,
+    *,
+    options: Mapping[str, Any] | None = None,
+    greedy: bool = False,
+    stochastic: bool = False,
+    repeats: int = 8,
+    backend: Any = None,
 ) -> Setup:
     """Resolve an experiment's inputs, failing fast with one line on any mismatch.
 
     Args:
         env: a registered env's name (or its spec).
-        agent: a ``Policy``, or text: a ``worldagent train`` run dir, the policy dir inside it, or
-            a scripted policy's name (``spec.scripted``).
+        agent: a ``Policy`` or ``HostPolicy``, or text ``agents.loaders.load_agent`` reads: a
+            ``worldagent train`` run dir, the policy dir inside it, a scripted policy's name
+            (``spec.scripted``), a ``.onnx`` model, a Stable-Baselines3 ``.zip``, or ``module:function``.
         generator: a ``Generator`` or its directory (``worldagent generator train``).
         options: env options (harvest: ``{"tagger": (0,)}``).
         greedy: trained actor-critics act by argmax instead of sampling.
+        stochastic: external agents that return logits sample them instead of taking the argmax.
         repeats: episodes per world (the paper: 8).
+        backend: a backend (``evaluation.backends.make_backend``) or None (this process).
     """
     spec = registry.get(env)
     options = spec.check_options(options)
@@ -129,8 +143,8 @@ def setup(
     if isinstance(agent, str):
         from worldagent.agents.loaders import load_agent
 
-        agent = load_agent(spec, agent, greedy, options)
-    return Setup(spec, env_obj, params, agent, generator, int(repeats), options)
+        agent = load_agent(spec, agent, greedy, options, stochastic)
+    return Setup(spec, env_obj, params, agent, generator, int(repeats), options, backend)
 
 
 # -- campaigns -----------------------------------------------------------------------------------
@@ -182,8 +196,9 @@ def search(
     name = name or campaign_name(optimiser, maximize, metric, seed)
     objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
     config = config or _stored_config(store, name) or OptimiserConfig()
-    spec = CampaignSpec(name, setup.spec.name, metric, maximize, optimiser, int(budget), int(seed), setup.generator.latent_dim, config)
-    return run_campaign(store, spec, objective, resume=resume, progress=progress), spec
+    agent = agent_record(setup.policy)
+    spec = CampaignSpec(name, setup.spec.name, metric, maximize, optimiser, int(budget), int(seed), setup.generator.latent_dim, config, agent=agent)
+    return run_campaign(store, spec, objective, resume=resume, progress=progress, backend=setup.backend), spec
 
 
 def random_evaluation(

@@ -106,6 +106,16 @@ def _use_wal(db: sqlite3.Connection, patience: float = 30.0) -> None:
             time.sleep(0.01)
 
 
+def _resumable(have: dict, wanted: dict) -> tuple[dict, dict]:
+    """The parts of two campaign configs that must agree to resume: the agent by its kind and file
+    hash, not by where its files are now (agents without files by name); stores from before
+    agents were recorded, without it."""
+    if "agent" not in have:
+        return have, {k: v for k, v in wanted.items() if k != "agent"}
+    same = lambda agent: agent and [agent.get("kind"), agent.get("sha256") or agent.get("path")]  # noqa: E731
+    return {**have, "agent": same(have.get("agent"))}, {**wanted, "agent": same(wanted.get("agent"))}
+
+
 class RunStore:
     """A SQLite run store (see the module docstring). Use as a context manager or ``close()``."""
 
@@ -223,8 +233,10 @@ class RunStore:
             seed=existing.seed,
             config=existing.config,
         )
-        if have != json.loads(json.dumps(wanted, sort_keys=True)):
-            differing = sorted(k for k in have if have[k] != json.loads(json.dumps(wanted[k], sort_keys=True)))
+        wanted = json.loads(json.dumps(wanted, sort_keys=True))
+        have["config"], wanted["config"] = _resumable(have["config"], wanted["config"])
+        if have != wanted:
+            differing = sorted(k for k in have if have[k] != wanted[k])
             raise WorldagentError(f"campaign {name!r} was started with other settings ({', '.join(differing)}); resume it with the same ones.")
         if budget != existing.budget:
             with self.db:

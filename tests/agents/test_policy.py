@@ -5,7 +5,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from worldagent.agents.external import CallablePolicy, host_episode
 from worldagent.agents.loaders import load_agent
 from worldagent.agents.networks import ActorCritic, QNetwork
 from worldagent.agents.saved import load_policy, save_policy
@@ -84,20 +83,7 @@ def test_load_agent_takes_run_dirs_policy_dirs_and_scripted_names(tmp_path, raci
     for name in ("random", "greedy"):
         policy = load_agent("harvest", name, options={"tagger": (0,)})
         assert policy.act(policy.params, harvest_obs, jax.random.key(0), None).shape == (4,)
-    with pytest.raises(WorldagentError, match="nor a scripted racing policy \\(driver, random\\)"):
+    with pytest.raises(WorldagentError, match="a scripted policy \\(driver, random\\)"):
         load_agent(racing_spec, "greedy")
     with pytest.raises(WorldagentError, match="racing agent, not a harvest"):
         load_agent("harvest", str(tmp_path / "run"))
-
-
-def test_callable_policy_host_loop(racing_env, racing_pool):
-    calls = []
-
-    def north(obs):
-        calls.append(obs.shape)
-        return 2  # accelerate north: leaves the road within a few dozen steps
-
-    state = host_episode(racing_env, CallablePolicy(north), jax.random.key(0), racing_pool.sample(jax.random.key(0)), racing_env.default_params)
-    assert calls[0] == racing_env.observation_shape and bool(state.done)
-    with pytest.raises(WorldagentError, match="callable"):
-        CallablePolicy(3)

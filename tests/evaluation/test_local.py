@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from worldagent.agents.external import CallablePolicy
+from worldagent.agents.external import HostPolicy
 from worldagent.agents.loaders import scripted_policy
 from worldagent.agents.policy import Policy
 from worldagent.envs.core import rollout
@@ -15,7 +15,7 @@ from worldagent.envs.harvest import Harvest, generate_maps, make_params
 from worldagent.envs.racing.env import ParticleRacing
 from worldagent.envs.racing.tracks import generate_tracks
 from worldagent.errors import WorldagentError
-from worldagent.evaluation.local import episode_keys, evaluate, evaluate_host, summarise
+from worldagent.evaluation.local import episode_keys, evaluate, summarise
 
 RACING = ParticleRacing()
 
@@ -58,13 +58,15 @@ def test_each_episode_is_the_episode_a_plain_rollout_plays(worlds):
     assert int(final.time) == int(metrics["steps"][4, 1])
 
 
-def test_the_host_loop_evaluator_gives_the_same_output(worlds):
+def test_an_external_agent_goes_to_the_host_evaluator_with_the_same_output(worlds):
     always_north = Policy(None, lambda params, obs, key, state=None: jnp.int32(2), "north")
     jitted = evaluate(RACING, always_north, worlds, 2, jax.random.key(0))
-    host = evaluate_host(RACING, CallablePolicy(lambda obs: 2), worlds, 2, jax.random.key(0))
+    calls = []
+    host = evaluate(RACING, HostPolicy(lambda obs: calls.append(obs.shape) or np.full(len(obs), 2), RACING.num_actions), worlds, 2, jax.random.key(0))
+    assert calls[0] == (12, *RACING.observation_shape)  # one call per step for all 6 worlds x 2 repeats
     assert set(host) == set(jitted)
     for name in jitted:
-        np.testing.assert_allclose(host[name], jitted[name], rtol=1e-5, atol=1e-4)
+        np.testing.assert_array_equal(host[name], jitted[name])
 
 
 def test_harvest_metrics_per_episode_and_per_agent():

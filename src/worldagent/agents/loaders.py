@@ -1,8 +1,13 @@
-"""Turning an ``--agent`` string into a ``Policy``: a training run, a saved policy, or a scripted one.
+"""Turning an ``--agent`` string into a policy: ours (jitted) or an external one (host).
 
 policy = load_agent(registry.get("racing"), "runs/ppo")       # a `worldagent train` run dir
 policy = load_agent(spec, "runs/ppo/policy")                   # the saved policy inside it
 policy = load_agent(spec, "driver")                            # a scripted policy of the spec
+policy = load_agent(spec, "agent.onnx")                        # an ONNX model (extra `onnx`)
+policy = load_agent(spec, "mymodule:act")                      # a Python callable obs batch -> actions
+policy = load_agent(spec, "ppo_racing.zip")                    # a Stable-Baselines3 model (extra `sb3`)
+
+Every policy carries its ``source`` (kind, path, file hash), which campaigns record.
 """
 
 from __future__ import annotations
@@ -11,8 +16,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from worldagent.agents.policy import Policy
-from worldagent.agents.saved import CONFIG_FILE, load_policy
+from worldagent.agents import external
+from worldagent.agents.policy import AgentSource, Policy, file_hash
+from worldagent.agents.saved import CONFIG_FILE, PARAMS_FILE, load_policy
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
@@ -27,7 +33,7 @@ def scripted_policy(spec: Any, name: str, options: Mapping[str, Any] | None = No
         raise WorldagentError(f"{spec.name} has no scripted policy {name!r}; its scripted policies: {known}.")
     env, params = spec.make_env(options)
     scripted = spec.scripted[name](env, params)
-    return Policy(scripted.params, scripted.act, name, privileged=scripted.privileged)
+    return Policy(scripted.params, scripted.act, name, privileged=scripted.privileged, source=AgentSource("scripted", name))
 
 
 def policy_dir(text: str | Path) -> Path | None:
@@ -39,18 +45,28 @@ def policy_dir(text: str | Path) -> Path | None:
     return None
 
 
-def load_agent(spec: Any, text: str | Path, greedy: bool = False, options: Mapping[str, Any] | None = None) -> Policy:
-    """The agent ``text`` names, as a ``Policy``.
+AGENT_FORMS = (
+    "a `worldagent train` run or policy directory, a scripted policy ({scripted}), a .onnx file, a Stable-Baselines3 .zip, or module:function"
+)
+
+
+def load_agent(
+    spec: Any, text: str | Path, greedy: bool = False, options: Mapping[str, Any] | None = None, stochastic: bool = False
+) -> Policy | external.HostPolicy:
+    """The agent ``text`` names: a jitted ``Policy`` (ours) or an external ``HostPolicy``.
 
     Args:
-        spec: the environment (an ``EnvSpec`` or its name); saved agents must be for it.
+        spec: the environment (an ``EnvSpec`` or its name); agents must fit its observations and actions.
         text: a ``worldagent train`` run directory (the agent in its ``policy/``), the policy
-            directory itself, or the name of one of ``spec.scripted``.
+            directory itself, the name of one of ``spec.scripted``, a ``.onnx`` model, a
+            Stable-Baselines3 ``.zip`` or ``module:function`` (see ``agents.external``).
         greedy: saved agents act by argmax (see ``saved.load_policy``).
-        options: the env options scripted policies are built for (e.g. harvest's tagger).
+        options: the env options the agent plays (e.g. harvest's tagger).
+        stochastic: external agents that return logits sample them instead of taking the argmax.
 
     Returns:
-        A ``Policy``: ``act(params, obs, key, state) -> action``.
+        A ``Policy`` (``act(params, obs, key, state) -> action``) or a ``HostPolicy``
+        (``obs batch -> actions``), each with its ``source``.
     """
     spec = registry.get(spec)
     text = str(text)
@@ -58,6 +74,15 @@ def load_agent(spec: Any, text: str | Path, greedy: bool = False, options: Mappi
         return scripted_policy(spec, text, options)
     directory = policy_dir(text)
     if directory is not None:
-        return load_policy(directory, env=spec.name, greedy=greedy).policy
-    known = ", ".join(spec.scripted) or "none"
-    raise WorldagentError(f"agent {text!r} is neither a run or policy directory (holding {CONFIG_FILE}) nor a scripted {spec.name} policy ({known}).")
+        policy = load_policy(directory, env=spec.name, greedy=greedy).policy
+        return policy.replace(source=AgentSource("worldagent", str(directory), file_hash(directory / CONFIG_FILE, directory / PARAMS_FILE)))
+    suffix = Path(text).suffix.lower()
+    if suffix in (".onnx", ".zip"):
+        env, _ = spec.make_env(options)
+        loader = external.load_onnx if suffix == ".onnx" else external.load_sb3
+        return loader(text, env, stochastic)
+    if external.is_callable_reference(text) and not Path(text).exists():
+        env, _ = spec.make_env(options)
+        return external.load_callable(text, env, stochastic)
+    forms = AGENT_FORMS.format(scripted=", ".join(spec.scripted) or "none")
+    raise WorldagentError(f"agent {text!r} is not {forms}; pass one of those.")

@@ -8,17 +8,54 @@ can be passed into jitted, vmapped evaluation code::
 ``state`` (the env state) is only read by *privileged* scripted policies such as the racing
 reference driver; every other policy ignores it. Trained networks become policies with
 ``network_policy``; saved agents are read by ``saved.load_policy``, ``--agent`` strings by
-``loaders.load_agent``, and external Python callables are ``external.CallablePolicy``.
+``loaders.load_agent``. External agents (ONNX, Python callables, Stable-Baselines3) are
+``external.HostPolicy`` values: numpy in, numpy out, stepped by the host evaluator.
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 from flax import struct
+
+
+@dataclass(frozen=True)
+class AgentSource:
+    """What an agent is, recorded with every campaign it plays (provenance).
+
+    Attributes:
+        kind: "worldagent" (a saved policy), "scripted", "onnx", "callable", "sb3" or "python".
+        path: the directory, file, ``module:function`` or scripted name the agent came from.
+        sha256: a hash of its file(s) (None for scripted and in-memory agents).
+    """
+
+    kind: str
+    path: str
+    sha256: str | None = None
+
+    def record(self) -> dict:
+        """As stored in a campaign's config."""
+        return asdict(self)
+
+
+def agent_record(policy: Any) -> dict:
+    """What ``policy`` is, as campaigns record it: its ``source``, or its name for agents built in Python."""
+    source = getattr(policy, "source", None) or AgentSource("python", str(getattr(policy, "name", type(policy).__name__)))
+    return source.record()
+
+
+def file_hash(*paths: Path) -> str:
+    """sha256 over the bytes of ``paths`` (in the order given)."""
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(Path(path).read_bytes())
+    return digest.hexdigest()
 
 
 @struct.dataclass
@@ -30,12 +67,14 @@ class Policy:
         act: ``act(params, obs, key, state) -> action`` (static, pure JAX).
         name: what it is, for reports (static).
         privileged: True when ``act`` reads the env ``state`` (scripted drivers) (static).
+        source: where the agent came from (``AgentSource``; None for agents built in Python) (static).
     """
 
     params: Any
     act: Callable = struct.field(pytree_node=False)
     name: str = struct.field(pytree_node=False, default="policy")
     privileged: bool = struct.field(pytree_node=False, default=False)
+    source: AgentSource | None = struct.field(pytree_node=False, default=None)
 
 
 def network_act(module, kind: str, greedy: bool = False, num_agents: int = 1, epsilon: float = 0.0) -> Callable:

@@ -8,7 +8,19 @@ import numpy as np
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, check_counts, env_argument, env_options, metric_help, option_flag
+from worldagent.commands.options import (
+    AGENT_HELP,
+    GENERATOR_HELP,
+    backend,
+    backend_flag,
+    check_counts,
+    env_argument,
+    env_options,
+    metric_help,
+    option_flag,
+    ray_address_flag,
+    stochastic_flag,
+)
 
 
 def normalised_note(setup, metric: str, evaluations) -> str:
@@ -41,6 +53,9 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(Path("runs/evaluate"), "--out", help="Run directory (store.sqlite and the histogram); a rerun resumes."),
         option: list[str] = option_flag(),
         greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+        stochastic: bool = stochastic_flag(),
+        backend_name: str = backend_flag(),
+        ray_address: str = ray_address_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
     ) -> None:
         """The distribution of a metric over randomly generated worlds (paper §6.1.1, Figure 6a)."""
@@ -49,7 +64,16 @@ def register(app: typer.Typer) -> None:
         from worldagent.store import RunStore
 
         check_counts(worlds=worlds, repeats=repeats)
-        setup = experiments.setup(env, agent, generator, options=env_options(env, option), greedy=greedy, repeats=repeats)
+        setup = experiments.setup(
+            env,
+            agent,
+            generator,
+            options=env_options(env, option),
+            greedy=greedy,
+            stochastic=stochastic,
+            repeats=repeats,
+            backend=backend(backend_name, ray_address),
+        )
         metric = setup.spec.metrics.resolve(metric, setup.spec.name)
         with RunStore(out) as store:
             evaluations = experiments.random_evaluation(store, setup, metric, worlds=worlds, seed=seed, progress=not quiet)

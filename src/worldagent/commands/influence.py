@@ -7,7 +7,17 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, algo_help, algorithm, check_counts, env_argument, env_options, option_flag
+from worldagent.commands.options import (
+    AGENT_HELP,
+    GENERATOR_HELP,
+    algo_help,
+    algorithm,
+    check_counts,
+    env_argument,
+    env_options,
+    option_flag,
+    stochastic_flag,
+)
 
 RESULT_FILE = "influence.json"  # what ``experiments.influence`` writes in its run directory
 SELECT_HELP = (
@@ -59,6 +69,7 @@ def influence_command(
     out: Path,
     greedy: bool,
     quiet: bool,
+    stochastic: bool = False,
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.influence.selection import parse_selection
@@ -73,7 +84,7 @@ def influence_command(
     from worldagent import experiments
     from worldagent.reports.influence import influence_figure
 
-    setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, repeats=repeats)
+    setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, stochastic=stochastic, repeats=repeats)
     result = experiments.influence(
         out,
         setup,
@@ -121,9 +132,26 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="Seed of the candidate, search and evaluation worlds."),
         out: Path = typer.Option(Path("runs/influence"), "--out", help="Run directory; rerun to resume or reuse finished steps."),
         greedy: bool = typer.Option(False, "--greedy", help="Actor-critics act by argmax instead of sampling."),
+        stochastic: bool = stochastic_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
     ) -> None:
         """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
         influence_command(
-            env, agent, generator, select, algo, episodes, seeds, candidates, search_budget, eval_worlds, repeats, option, seed, out, greedy, quiet
+            env,
+            agent,
+            generator,
+            select,
+            algo,
+            episodes,
+            seeds,
+            candidates,
+            search_budget,
+            eval_worlds,
+            repeats,
+            option,
+            seed,
+            out,
+            greedy,
+            quiet,
+            stochastic,
         )

@@ -11,7 +11,11 @@ import typer
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
-AGENT_HELP = "A `worldagent train` run directory (or the agent directory in it), or a scripted policy (`worldagent envs` lists them)."
+AGENT_HELP = (
+    "The agent: a `worldagent train` run directory (or the agent directory in it), a scripted policy (`worldagent envs` lists them), "
+    "a .onnx model, a Stable-Baselines3 .zip, or module:function (a Python callable obs batch -> actions, from the working directory)."
+)
+STOCHASTIC_HELP = "External agents that return logits sample their action (with the episode's key) instead of taking the argmax."
 GENERATOR_HELP = "Generator directory (from `worldagent generator train`)."
 OPTION_HELP = "An environment option NAME=VALUE, e.g. tagger=0 for harvest (repeatable; `worldagent envs` lists them)."
 QUIET_HELP = "No progress bars."
@@ -36,6 +40,28 @@ def env_argument():
 def option_flag():
     """The repeatable ``--option NAME=VALUE``."""
     return typer.Option([], "--option", help=OPTION_HELP)
+
+
+def stochastic_flag():
+    """``--stochastic``: external agents sample from their logits."""
+    return typer.Option(False, "--stochastic", help=STOCHASTIC_HELP)
+
+
+def backend_flag():
+    """``--backend``: where campaigns evaluate their world batches."""
+    return typer.Option("local", "--backend", help="Where world batches are evaluated: local (every local device) or ray (extra `ray`).")
+
+
+def ray_address_flag():
+    """``--ray-address``: a Ray cluster to join."""
+    return typer.Option(None, "--ray-address", help="A running Ray cluster to join (`ray start --head` prints it); default: start a local one.")
+
+
+def backend(name: str, address: str | None):
+    """The backend of ``--backend`` / ``--ray-address``."""
+    from worldagent.evaluation.backends import make_backend
+
+    return make_backend(name, address)
 
 
 def env_options(env: str, texts: list[str]) -> dict:

@@ -7,7 +7,18 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, env_argument, env_options, metric_help, option_flag
+from worldagent.commands.options import (
+    AGENT_HELP,
+    GENERATOR_HELP,
+    backend,
+    backend_flag,
+    env_argument,
+    env_options,
+    metric_help,
+    option_flag,
+    ray_address_flag,
+    stochastic_flag,
+)
 
 
 def register(app: typer.Typer) -> None:
@@ -30,6 +41,9 @@ def register(app: typer.Typer) -> None:
         resume: bool = typer.Option(False, "--resume", help="Continue a killed campaign of the same name."),
         option: list[str] = option_flag(),
         greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+        stochastic: bool = stochastic_flag(),
+        backend_name: str = backend_flag(),
+        ray_address: str = ray_address_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
     ) -> None:
         """Search the generator's latent space for worlds that minimise or maximise an agent metric (paper §4.4)."""
@@ -38,7 +52,16 @@ def register(app: typer.Typer) -> None:
         from worldagent import experiments
         from worldagent.store import RunStore
 
-        setup = experiments.setup(env, agent, generator, options=env_options(env, option), greedy=greedy, repeats=repeats)
+        setup = experiments.setup(
+            env,
+            agent,
+            generator,
+            options=env_options(env, option),
+            greedy=greedy,
+            stochastic=stochastic,
+            repeats=repeats,
+            backend=backend(backend_name, ray_address),
+        )
         with RunStore(out) as store:
             evaluations, spec = experiments.search(
                 store,

@@ -11,7 +11,19 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import AGENT_HELP, GENERATOR_HELP, check_counts, env_argument, env_options, metric_help, option_flag
+from worldagent.commands.options import (
+    AGENT_HELP,
+    GENERATOR_HELP,
+    backend,
+    backend_flag,
+    check_counts,
+    env_argument,
+    env_options,
+    metric_help,
+    option_flag,
+    ray_address_flag,
+    stochastic_flag,
+)
 from worldagent.errors import WorldagentError
 
 
@@ -45,6 +57,9 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(Path("runs/strategic"), "--out", help="Run directory: store.sqlite and the figure."),
         option: list[str] = option_flag(),
         greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+        stochastic: bool = stochastic_flag(),
+        backend_name: str = backend_flag(),
+        ray_address: str = ray_address_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
     ) -> None:
         """Find the worlds where the agents do worst and best, and draw them (paper §6.1.2, Figures 1 and 6b)."""
@@ -55,7 +70,16 @@ def register(app: typer.Typer) -> None:
         from worldagent.store import RunStore
 
         check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
-        setup = experiments.setup(env, agent, generator, options=env_options(env, option), greedy=greedy, repeats=repeats)
+        setup = experiments.setup(
+            env,
+            agent,
+            generator,
+            options=env_options(env, option),
+            greedy=greedy,
+            stochastic=stochastic,
+            repeats=repeats,
+            backend=backend(backend_name, ray_address),
+        )
         metric = setup.spec.metrics.resolve(metric, setup.spec.name)
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=seed, progress=not quiet)
@@ -87,6 +111,9 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(Path("runs/compare"), "--out", help="Run directory: store.sqlite, comparison.png/.md/.csv."),
         option: list[str] = option_flag(),
         greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+        stochastic: bool = stochastic_flag(),
+        backend_name: str = backend_flag(),
+        ray_address: str = ray_address_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
     ) -> None:
         """Compare the optimisers' sample efficiency against random worlds (paper §6.1.3, Figure 7)."""
@@ -100,7 +127,16 @@ def register(app: typer.Typer) -> None:
         names = optimiser_names(optimisers)
         if 0 <= random_seed < seeds:
             raise WorldagentError(f"--random-seed {random_seed} is one of the optimisers' seeds (0 to {seeds - 1}); pick one outside them.")
-        setup = experiments.setup(env, agent, generator, options=env_options(env, option), greedy=greedy, repeats=repeats)
+        setup = experiments.setup(
+            env,
+            agent,
+            generator,
+            options=env_options(env, option),
+            greedy=greedy,
+            stochastic=stochastic,
+            repeats=repeats,
+            backend=backend(backend_name, ray_address),
+        )
         metric = setup.spec.metrics.resolve(metric, setup.spec.name)
         maximize = not minimize
         with RunStore(out) as store:

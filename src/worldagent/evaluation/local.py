@@ -6,8 +6,8 @@ jitted ``vmap(vmap(while_loop))`` over worlds × repeats × steps. An episode's 
 it ends; under ``vmap`` the batch runs until its last episode ends, the finished ones frozen.
 Nothing per step is stored: the metrics accumulate in the env state.
 
-``evaluate_host`` does the same for an external (non-JAX) policy (``agents.external.CallablePolicy``),
-one episode at a time from Python, with the same output.
+External agents (``agents.external.HostPolicy``, ``host = True``) go to the batched host
+evaluator (``evaluation/host.py``) with the same keys and the same output.
 """
 
 from __future__ import annotations
@@ -76,7 +76,8 @@ def evaluate(
 
     Args:
         env: the environment.
-        policy: a ``Policy`` (a pytree with ``act(params, obs, key, state)``).
+        policy: a ``Policy`` (a pytree with ``act(params, obs, key, state)``), or an external
+            ``HostPolicy`` (stepped by the batched host evaluator).
         worlds: B worlds with a leading batch axis.
         repeats: episodes per world (the paper: 8).
         key: randomness of all the episodes (ignored if ``keys`` is given).
@@ -96,31 +97,17 @@ def evaluate(
     keys = episode_keys(key, count, repeats) if keys is None else keys
     if keys.shape[:2] != (count, repeats):
         raise WorldagentError(f"episode keys have shape {keys.shape}; expected ({count}, {repeats}).")
-    run = _compiled(env, num_steps)
+    if getattr(policy, "host", False):
+        from worldagent.evaluation.host import evaluate_host
+
+        run = lambda policy, part, keys, params: evaluate_host(env, policy, part, keys, params, num_steps)
+    else:
+        run = _compiled(env, num_steps)
     chunks = []
     for start in range(0, count, MAX_BATCH):
         part = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf[start : start + MAX_BATCH]), worlds)
         chunks.append(jax.tree_util.tree_map(np.asarray, run(policy, part, keys[start : start + MAX_BATCH], params)))
     return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in chunks[0]}
-
-
-def evaluate_host(
-    env: Environment, policy, worlds: Any, repeats: int, key: jax.Array, params: Any = None, num_steps: int | None = None
-) -> dict[str, np.ndarray]:
-    """``evaluate`` for an external policy called from Python (slow; same output)."""
-    from worldagent.agents.external import host_episode
-
-    params = env.default_params if params is None else params
-    count = _batch_size(worlds)
-    keys = episode_keys(key, count, repeats)
-    rows = []
-    for b in range(count):
-        world = jax.tree_util.tree_map(lambda leaf: leaf[b], worlds)
-        episodes = [
-            jax.tree_util.tree_map(np.asarray, env.metrics(host_episode(env, policy, keys[b, r], world, params, num_steps))) for r in range(repeats)
-        ]
-        rows.append({name: np.stack([e[name] for e in episodes]) for name in episodes[0]})
-    return {name: np.stack([row[name] for row in rows]) for name in rows[0]}
 
 
 def summarise(metrics: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:

@@ -100,13 +100,22 @@ def _compiled(env: Environment, trace, num_steps: int):
     return jax.jit(episodes)
 
 
+def _replay_host(env: Environment, trace, policy, world: Any, keys: jax.Array, params: Any, num_steps: int):
+    """``replay_episode``'s outputs for an external (host) policy, from the batched host evaluator."""
+    from worldagent.evaluation.host import host_rollouts
+
+    worlds = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], world)
+    metrics, steps, (positions, present) = host_rollouts(env, policy, worlds, keys[None], params, num_steps, trace)
+    return positions[0], present[0], steps[0], {name: value[0] for name, value in metrics.items()}
+
+
 def replay(spec, env: Environment, policy, world: Any, keys: jax.Array, params: Any = None, num_steps: int | None = None) -> Episodes:
     """Replay E episodes of ``policy`` on one (unbatched) ``world``, keeping positions.
 
     Args:
         spec: the env's ``EnvSpec`` (or its name): ``spec.trace`` says where the agents are.
         env: the environment.
-        policy: a ``Policy``.
+        policy: a ``Policy``, or an external ``HostPolicy`` (played by the host evaluator).
         world: one world (no batch axis).
         keys: ``[E]`` episode keys (``scored_keys`` for the episodes a campaign scored).
         params: env parameters (default: ``env.default_params``).
@@ -119,14 +128,15 @@ def replay(spec, env: Environment, policy, world: Any, keys: jax.Array, params: 
     num_steps = int(params.max_steps) if num_steps is None else int(num_steps)
     if num_steps < 1:
         raise WorldagentError(f"num_steps={num_steps}; replay at least one step.")
-    if getattr(policy, "host", False):
-        raise WorldagentError("replay runs jitted policies; an external CallablePolicy cannot be replayed here.")
     env.check_world(world)
     keys = jnp.asarray(keys)
     if keys.ndim != 1 or len(keys) < 1:
         raise WorldagentError(f"episode keys have shape {keys.shape}; pass a 1-d array of at least one key.")
     trace = registry.get(spec).trace
-    positions, present, steps, metrics = _compiled(env, trace, num_steps)(policy, world, keys, params)
+    if getattr(policy, "host", False):
+        positions, present, steps, metrics = _replay_host(env, trace, policy, world, keys, params, num_steps)
+    else:
+        positions, present, steps, metrics = _compiled(env, trace, num_steps)(policy, world, keys, params)
     return Episodes(
         np.asarray(positions),
         np.asarray(present, bool),

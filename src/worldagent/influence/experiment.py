@@ -29,6 +29,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from worldagent.agents.policy import agent_record
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.influence.cache import PLAN_FILE, TRAINED_FILE, WORLDS_FILE, check_plan, config_dict, fingerprint, save_influenced_worlds
@@ -54,6 +55,7 @@ def evaluate_campaign(store, campaign, objective, env, policy, G, params, repeat
     from worldagent.search.objectives import LatentObjective
 
     evaluate = LatentObjective(objective, env, policy, G, repeats, params, keep_worlds=keep_worlds)
+    campaign = dataclasses.replace(campaign, agent=agent_record(policy))
     return run_campaign(store, campaign, evaluate, resume=True, progress=progress)
 
 

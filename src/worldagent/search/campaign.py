@@ -9,7 +9,8 @@ stored scores are told back and only the missing evaluations are run. Evaluation
 comes from (seed, generation, slot), not from a running stream, so a resumed campaign ends with
 exactly the evaluations of an uninterrupted one.
 
-``evaluate(z[n, dim], seeds int[n]) -> list of Outcome``: one outcome per latent. A score that
+``evaluate(z[n, dim], seeds int[n]) -> list of Outcome``: one outcome per latent. A backend
+(``evaluation.backends``) runs a generation's batches here or on Ray workers. A score that
 is NaN (a broken policy, a metric that failed) is stored and reported, and the campaign stops
 with an error instead of optimising on it.
 """
@@ -24,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from worldagent.errors import WorldagentError
+from worldagent.evaluation.backends import LocalBackend, split
 from worldagent.progress import progress_bar
 from worldagent.search.optimisers import OptimiserConfig, make_optimiser
 from worldagent.store import Evaluation, RunStore
@@ -60,7 +62,10 @@ class CampaignSpec:
         seed: seed of the optimiser and of every evaluation.
         dim: latent dimension.
         config: optimiser settings.
-        chunk: latents evaluated per call of ``evaluate`` (0: a whole generation).
+        chunk: latents evaluated per call of ``evaluate`` (0: a whole generation, or an even
+            share per worker of a Ray backend).
+        agent: what the agent is (``policy.agent_record``: kind, path, file hash), kept in the
+            campaign's config; a campaign is resumed only with an agent of the same files.
     """
 
     name: str
@@ -73,6 +78,7 @@ class CampaignSpec:
     dim: int = 10
     config: OptimiserConfig = OptimiserConfig()
     chunk: int = 0
+    agent: dict | None = None
 
     def validate(self) -> None:
         if self.budget < 1:
@@ -101,9 +107,14 @@ def run_campaign(
     evaluate: Callable[[np.ndarray, np.ndarray], Sequence[Outcome]],
     resume: bool = False,
     progress: bool = True,
+    backend: Any = None,
 ) -> list[Evaluation]:
-    """Run (or resume) a campaign to its budget; returns all its evaluations in order."""
+    """Run (or resume) a campaign to its budget; returns all its evaluations in order.
+
+    ``backend`` (``evaluation.backends``; default local) runs each generation's batches.
+    """
     spec.validate()
+    backend = backend or LocalBackend()
     campaign = store.open_campaign(
         spec.name,
         spec.env,
@@ -112,7 +123,7 @@ def run_campaign(
         spec.optimiser,
         spec.budget,
         spec.seed,
-        {"dim": spec.dim, **asdict(spec.config)},
+        {"dim": spec.dim, **asdict(spec.config), **({"agent": spec.agent} if spec.agent else {})},
         resume,
     )
     stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
@@ -139,12 +150,10 @@ def run_campaign(
                     )
                 scores[slot] = previous.score
             advance(len(z) - len(missing))
-            step = spec.chunk or max(1, len(missing))
-            for start in range(0, len(missing), step):
-                slots = missing[start : start + step]
-                seeds = np.asarray([evaluation_seed(spec.seed, generation, s) for s in slots])
-                started = time.time()
-                outcomes = evaluate(z[slots], seeds)
+            seeds = {s: evaluation_seed(spec.seed, generation, s) for s in missing}
+            batches = [(slots, z[slots], np.asarray([seeds[s] for s in slots])) for slots in split(missing, backend.workers, spec.chunk)]
+            started = time.time()
+            for slots, outcomes in backend.run(evaluate, batches):  # committed as each batch arrives
                 for slot, outcome in zip(slots, outcomes):
                     store.add(campaign, generation, slot, z[slot], outcome.score, outcome.episodes, started, outcome.world)
                     scores[slot] = outcome.score

@@ -1,0 +1,124 @@
+"""Where a campaign's world batches are evaluated: in this process, or on Ray workers.
+
+``backend.run(evaluate, batches)`` takes the batches of one generation, ``[(slots, z, seeds)]``,
+and yields ``(slots, outcomes)`` as each batch finishes; the campaign commits them to the store
+as they arrive. An evaluation depends only on its latent and seed, never on which batch or
+worker ran it, so both backends fill the store with the same evaluations, and resuming works
+as for local runs.
+
+- ``LocalBackend``: one batch after another here (the local evaluator already uses every local
+  device).
+- ``RayBackend`` (extra ``ray``): batches go to Ray tasks, one per worker, each running the same
+  evaluator (jitted or host). A task whose worker dies is retried by Ray (``max_retries``), and
+  only the driver writes to the store, so nothing is lost or counted twice. ``address`` joins a
+  running cluster (``ray start --head`` on one machine, then ``--ray-address HOST:6379``);
+  without one a local cluster starts.
+"""
+
+from __future__ import annotations
+
+import math
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from worldagent.errors import WorldagentError
+
+BACKENDS = ("local", "ray")
+TASK_RETRIES = 3  # re-runs of a batch whose worker died
+
+Batch = tuple[list[int], np.ndarray, np.ndarray]  # (slots, z[n, dim], seeds[n])
+
+
+class LocalBackend:
+    """Evaluate batches one after another in this process."""
+
+    name = "local"
+    workers = 1
+
+    def run(self, evaluate: Callable, batches: Sequence[Batch]) -> Iterator[tuple[list[int], Any]]:
+        for slots, z, seeds in batches:
+            yield slots, evaluate(z, seeds)
+
+
+class RayBackend:
+    """Evaluate batches as Ray tasks, yielding each as it finishes (see the module docstring).
+
+    Args:
+        address: a running cluster's address (``ray start --head`` prints it); None starts a
+            local cluster with ``workers`` CPUs.
+        workers: CPUs of a local cluster (default: all of this machine's).
+    """
+
+    name = "ray"
+
+    def __init__(self, address: str | None = None, workers: int | None = None):
+        try:
+            import ray
+        except ImportError:
+            raise WorldagentError("--backend ray needs Ray: pip install 'worldagent[ray]'.") from None
+        self.ray = ray
+        if not ray.is_initialized():
+            try:
+                ray.init(address=address, num_cpus=None if address else workers, include_dashboard=False, log_to_driver=False)
+            except (ConnectionError, RuntimeError, ValueError) as error:
+                first = (str(error).splitlines() or [""])[0][:160]
+                raise WorldagentError(f"cannot join the Ray cluster at {address or 'a new local cluster'} ({first}); check --ray-address.") from None
+        self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        self._task = ray.remote(max_retries=TASK_RETRIES)(_evaluate_batch)
+        self._shipped: dict[int, tuple[str, Any]] = {}
+
+    def run(self, evaluate: Callable, batches: Sequence[Batch]) -> Iterator[tuple[list[int], Any]]:
+        token, ref = self._ship(evaluate)
+        pending = {self._task.remote(token, [ref], z, seeds): slots for slots, z, seeds in batches}
+        while pending:
+            done, _ = self.ray.wait(list(pending), num_returns=1)
+            slots = pending.pop(done[0])
+            try:
+                outcomes = self.ray.get(done[0])
+            except self.ray.exceptions.RayTaskError as error:  # the evaluator's own error, e.g. a bad agent
+                cause = error.cause if isinstance(getattr(error, "cause", None), Exception) else error
+                raise WorldagentError(str(cause).splitlines()[0] if str(cause) else type(cause).__name__) from None
+            yield slots, outcomes
+
+    def _ship(self, evaluate: Callable) -> tuple[str, Any]:
+        """The evaluator in the object store, once per evaluator, with a token workers cache it under."""
+        key = id(evaluate)
+        if key not in self._shipped:
+            self._shipped[key] = (uuid.uuid4().hex, self.ray.put(evaluate))
+        return self._shipped[key]
+
+
+_WORKER_CACHE: dict[str, Callable] = {}  # in each worker: evaluators by token, so jitted code compiles once
+
+
+def _evaluate_batch(token: str, refs: list, z: np.ndarray, seeds: np.ndarray):
+    """A Ray task: the shipped evaluator on one batch (the ref comes in a list so Ray leaves it unresolved)."""
+    if token not in _WORKER_CACHE:
+        import ray
+
+        _WORKER_CACHE.clear()  # one campaign's evaluator at a time
+        _WORKER_CACHE[token] = ray.get(refs[0])
+    return _WORKER_CACHE[token](z, seeds)
+
+
+def split(slots: Sequence[int], parts: int, chunk: int = 0) -> list[list[int]]:
+    """``slots`` in consecutive batches: of ``chunk`` each, or (0) ``parts`` batches as even as possible."""
+    slots = list(slots)
+    if not slots:
+        return []
+    size = chunk or math.ceil(len(slots) / max(1, parts))
+    return [slots[start : start + size] for start in range(0, len(slots), size)]
+
+
+def make_backend(name: str = "local", address: str | None = None, workers: int | None = None) -> LocalBackend | RayBackend:
+    """The backend ``--backend`` names; ``address`` and ``workers`` are Ray's."""
+    if name not in BACKENDS:
+        raise WorldagentError(f"unknown backend {name!r}; use one of: {', '.join(BACKENDS)}.")
+    if name == "local":
+        if address:
+            raise WorldagentError("--ray-address needs --backend ray.")
+        return LocalBackend()
+    return RayBackend(address, workers)

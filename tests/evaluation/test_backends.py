@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import sys
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -22,9 +21,7 @@ def stored(path, name: str) -> list[tuple]:
     """A campaign's evaluations as comparable rows, in (generation, slot) order."""
     with RunStore(path) as store:
         rows = store.iter_evaluations(name, with_worlds=True)
-        return sorted(
-            (e.generation, e.slot, e.latent.tolist(), e.score, e.episodes, {k: v.tolist() for k, v in e.world.items()}) for e in rows
-        )
+        return sorted((e.generation, e.slot, e.latent.tolist(), e.score, e.episodes, {k: v.tolist() for k, v in e.world.items()}) for e in rows)
 
 
 def test_batches_split_evenly_or_by_chunk():

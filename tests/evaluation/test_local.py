@@ -90,3 +90,30 @@ def test_bad_requests_get_clear_errors(worlds):
     one = jax.tree_util.tree_map(lambda leaf: leaf[0], worlds)
     with pytest.raises(WorldagentError, match="centreline has shape"):
         evaluate(RACING, random_racing_policy(), one, 2, jax.random.key(0))
+
+
+def test_sharding_over_two_devices_gives_the_metrics_of_one(tmp_path, worlds):
+    """Five worlds (padded to six) over two forced host devices, in a fresh process."""
+    import os
+    import subprocess
+    import sys
+
+    want = evaluate(RACING, scripted_policy("racing", "driver"), jax.tree_util.tree_map(lambda leaf: leaf[:5], worlds), 2, jax.random.key(5))
+    script = (
+        "import jax, numpy as np\n"
+        "from worldagent.agents.loaders import scripted_policy\n"
+        "from worldagent.envs.racing.env import ParticleRacing\n"
+        "from worldagent.envs.racing.tracks import generate_tracks\n"
+        "from worldagent.evaluation.local import evaluate\n"
+        "assert len(jax.devices()) == 2\n"
+        "worlds = jax.tree_util.tree_map(lambda leaf: leaf[:5], generate_tracks(np.arange(6)))\n"
+        "metrics = evaluate(ParticleRacing(), scripted_policy('racing', 'driver'), worlds, 2, jax.random.key(5))\n"
+        f"np.savez({str(tmp_path / 'two.npz')!r}, **metrics)\n"
+    )
+    flags = f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"  # the same compiler settings, two devices
+    env = {**os.environ, "XLA_FLAGS": flags, "JAX_PLATFORMS": "cpu"}
+    subprocess.run([sys.executable, "-c", script], check=True, env=env, timeout=300)
+    with np.load(tmp_path / "two.npz") as two:
+        assert set(two.files) == set(want)
+        for name in want:
+            np.testing.assert_array_equal(two[name], want[name])

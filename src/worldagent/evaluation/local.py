@@ -4,7 +4,8 @@
 episodes as an array ``[B, repeats]`` (or ``[B, repeats, N]`` for per-agent metrics), from one
 jitted ``vmap(vmap(while_loop))`` over worlds × repeats × steps. An episode's loop stops when
 it ends; under ``vmap`` the batch runs until its last episode ends, the finished ones frozen.
-Nothing per step is stored: the metrics accumulate in the env state.
+Nothing per step is stored: the metrics accumulate in the env state. With several local
+devices (a host with 8 GPUs) each batch of worlds is sharded over all of them.
 
 External agents (``agents.external.HostPolicy``, ``host = True``) go to the batched host
 evaluator (``evaluation/host.py``) with the same keys and the same output.
@@ -18,6 +19,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from worldagent.envs.core import Environment
 from worldagent.errors import WorldagentError
@@ -62,6 +64,19 @@ def episode_keys(key: jax.Array, worlds: int, repeats: int) -> jax.Array:
     return jax.random.split(key, (worlds, repeats))
 
 
+def on_all_devices(batch: Any) -> Any:
+    """``batch`` (leading axis B) sharded over every local device, padded to a multiple of their
+    number with copies of its last entry (drop the padding from the results: ``[:B]``)."""
+    devices = jax.local_devices()
+    if len(devices) == 1:
+        return batch
+    size = len(jax.tree_util.tree_leaves(batch)[0])
+    pad = -size % len(devices)
+    padded = jax.tree_util.tree_map(lambda leaf: jnp.concatenate([leaf, jnp.repeat(leaf[-1:], pad, axis=0)]) if pad else leaf, batch)
+    sharding = NamedSharding(Mesh(np.array(devices), ("worlds",)), PartitionSpec("worlds"))
+    return jax.device_put(padded, sharding)
+
+
 def evaluate(
     env: Environment,
     policy,
@@ -97,16 +112,19 @@ def evaluate(
     keys = episode_keys(key, count, repeats) if keys is None else keys
     if keys.shape[:2] != (count, repeats):
         raise WorldagentError(f"episode keys have shape {keys.shape}; expected ({count}, {repeats}).")
-    if getattr(policy, "host", False):
-        from worldagent.evaluation.host import evaluate_host
-
-        run = lambda policy, part, keys, params: evaluate_host(env, policy, part, keys, params, num_steps)
-    else:
-        run = _compiled(env, num_steps)
+    host = getattr(policy, "host", False)
     chunks = []
     for start in range(0, count, MAX_BATCH):
         part = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf[start : start + MAX_BATCH]), worlds)
-        chunks.append(jax.tree_util.tree_map(np.asarray, run(policy, part, keys[start : start + MAX_BATCH], params)))
+        part_keys = keys[start : start + MAX_BATCH]
+        if host:
+            from worldagent.evaluation.host import evaluate_host
+
+            chunks.append(evaluate_host(env, policy, part, part_keys, params, num_steps))
+        else:
+            sharded = on_all_devices((part, part_keys))
+            metrics = _compiled(env, num_steps)(policy, *sharded, params)
+            chunks.append(jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[: len(part_keys)], metrics))
     return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in chunks[0]}
 
 

@@ -4,11 +4,19 @@ __version__ = "0.1.0"
 
 
 def _register_gymnasium_envs() -> None:
-    """Make ``gymnasium.make("worldagent/ParticleRacing-v0")`` work after ``import worldagent``."""
+    """Make ``gymnasium.make("worldagent/ParticleRacing-v0")`` and ``gymnasium.make_vec`` of it work after ``import worldagent``.
+
+    ``make`` gives ``envs.adapters.ParticleRacingGym``; ``make_vec(..., num_envs=N)`` gives
+    ``envs.vector.ParticleRacingVectorEnv`` (N envs in one jitted step, SAME_STEP autoreset).
+    """
     from gymnasium.envs.registration import register, registry
 
     if "worldagent/ParticleRacing-v0" not in registry:
-        register(id="worldagent/ParticleRacing-v0", entry_point="worldagent.envs.adapters:ParticleRacingGym")
+        register(
+            id="worldagent/ParticleRacing-v0",
+            entry_point="worldagent.envs.adapters:ParticleRacingGym",
+            vector_entry_point="worldagent.envs.vector:ParticleRacingVectorEnv",
+        )
 
 
 _register_gymnasium_envs()

@@ -4,12 +4,17 @@
 ``agent_0..agent_3``, a new seeded map at every reset; see ``envs/harvest/pettingzoo_env.py``).
 
 ``ParticleRacingGym`` is a ``gymnasium.Env`` (registered as ``worldagent/ParticleRacing-v0`` by
-``import worldagent``)
-that draws a new track from CarRacing's generator at every reset, seeded by Gymnasium's own
-``np_random``; ``reset(options={"world": track})`` drives a given track instead.
+``import worldagent``) that drives a track drawn at every reset, by Gymnasium's own
+``np_random``, from a pool of CarRacing tracks generated once and cached on disk
+(``vector.track_pool``), so a reset takes well under a millisecond instead of generating a
+track (~75 ms). ``reset(options={"track_seed": s})`` generates CarRacing's track ``s``;
+``reset(options={"world": track})`` drives a given track. ``gymnasium.make_vec`` of the same id
+gives the batched ``vector.ParticleRacingVectorEnv``.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import gymnasium
 import jax
@@ -17,10 +22,10 @@ import numpy as np
 from gymnasium import spaces
 
 from worldagent.envs.core import check_actions
-from worldagent.envs.racing.env import ROUTE_SCALE, ParticleRacing, RacingParams
+from worldagent.envs.racing.env import ParticleRacing, RacingParams
 from worldagent.envs.racing.world import Track
-
-ROUTE_REACH = 2.0  # normalised units: a bound on how far ahead a route point can be, with margin
+from worldagent.envs.vector import POOL_SEED, POOL_SIZE, check_pool_arguments, load_pool, observation_space, take
+from worldagent.worlds.dataset import WorldDataset
 
 
 class ParticleRacingGym(gymnasium.Env):
@@ -30,42 +35,77 @@ class ParticleRacingGym(gymnasium.Env):
         render_mode: ``None`` or ``"rgb_array"`` (a 256×256 picture of the track and agent).
         params: the env's ``RacingParams`` (defaults: the paper's rewards and 300-step limit).
         window: side of the observation's road window, 0 for none (see ``ParticleRacing``).
+        pool_size: tracks in the pool resets draw from (generated at the first reset that needs
+            it, then cached on disk; see ``vector.track_pool``).
+        pool: a racing ``worldagent dataset`` file (or ``WorldDataset``) to draw tracks from instead.
+        pool_seed: the first CarRacing seed of the generated pool.
+        cache_dir: where the generated pool is cached (default ``$XDG_CACHE_HOME/worldagent``
+            or ``~/.cache/worldagent``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
 
-    def __init__(self, render_mode: str | None = None, params: RacingParams | None = None, window: int = 0):
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        params: RacingParams | None = None,
+        window: int = 0,
+        pool_size: int = POOL_SIZE,
+        pool: WorldDataset | Path | str | None = None,
+        pool_seed: int = POOL_SEED,
+        cache_dir: Path | str | None = None,
+    ):
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; use None or 'rgb_array'.")
+        check_pool_arguments(pool_size, pool_seed)
         self.render_mode = render_mode
         self.env = ParticleRacing(window=window)
         self.params = params or self.env.default_params
-        cells, route = window * window, 2 * len(self.env.route)
-        reach = ROUTE_REACH / ROUTE_SCALE  # route points are at most ~0.5 units away
-        low = np.concatenate([np.zeros(cells), [-1.5, -1.5, -1.0, -1.0], np.full(route, -reach)]).astype(np.float32)
-        high = np.concatenate([np.ones(cells), [1.5, 1.5, 1.0, 1.0], np.full(route, reach)]).astype(np.float32)
-        self.observation_space = spaces.Box(low=low, high=high, dtype=np.float32)
+        self.observation_space = observation_space(self.env)
         self.action_space = spaces.Discrete(self.env.num_actions)
         self._reset = jax.jit(self.env.reset)
+        self._reset_from_pool = jax.jit(lambda worlds, index, params: self.env.reset(jax.random.key(0), take(worlds, index), params))
         self._step = jax.jit(self.env.step)
+        self._pool_request = (pool, pool_size, pool_seed, cache_dir)
+        self._pool: tuple[Track, np.ndarray] | None = None  # (worlds on the device, seeds), loaded at the first reset from it
         self._state = None
         self._trail: list[np.ndarray] = []
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        from worldagent.envs.racing.tracks import generate_track
+        """Start an episode on a pool track (or ``options["world"]``, or CarRacing's ``options["track_seed"]``).
 
+        Returns:
+            (obs f32[D], info ``{"track_seed": CarRacing seed of the track, None for a given world}``).
+        """
+        super().reset(seed=seed)
         options = options or {}
-        track_seed = None
         if "world" in options:
-            world = options["world"]
-        else:
-            track_seed = int(options.get("track_seed", self.np_random.integers(0, 2**31 - 1)))
+            world, track_seed = options["world"], None
+        elif "track_seed" in options:
+            from worldagent.envs.racing.tracks import generate_track
+
+            track_seed = int(options["track_seed"])
             world = generate_track(track_seed)
+        else:
+            worlds, seeds = self._track_pool()
+            index = int(self.np_random.integers(len(seeds)))
+            obs, self._state = self._reset_from_pool(worlds, np.int32(index), self.params)
+            return self._started(obs, int(seeds[index]))
         self.env.check_world(world)
         obs, self._state = self._reset(jax.random.key(0), world, self.params)
+        return self._started(obs, track_seed)
+
+    def _started(self, obs, track_seed: int | None):
+        """The observation and info of a reset, with the trail started at the start line."""
         self._trail = [np.asarray(self._state.position)]
         return np.asarray(obs), {"track_seed": track_seed}
+
+    def _track_pool(self) -> tuple[Track, np.ndarray]:
+        """(the pool's tracks on the device, leading axis P; their CarRacing seeds int64[P]), loaded once."""
+        if self._pool is None:
+            dataset = load_pool(*self._pool_request)
+            self._pool = (jax.tree_util.tree_map(jax.numpy.asarray, dataset.worlds), dataset.seeds)
+        return self._pool
 
     def step(self, action):
         if self._state is None:

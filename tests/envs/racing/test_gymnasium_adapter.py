@@ -13,8 +13,9 @@ from worldagent.errors import WorldagentError
 
 
 @pytest.fixture(scope="module")
-def gym_env():
-    return gymnasium.make("worldagent/ParticleRacing-v0", render_mode="rgb_array").unwrapped
+def gym_env(tmp_path_factory):
+    # A small track pool, cached in a temporary folder rather than the user's home.
+    return gymnasium.make("worldagent/ParticleRacing-v0", render_mode="rgb_array", pool_size=16, cache_dir=tmp_path_factory.mktemp("cache")).unwrapped
 
 
 def test_check_env_passes(gym_env):

@@ -17,6 +17,7 @@ as for local runs.
 
 from __future__ import annotations
 
+import logging
 import math
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -62,7 +63,13 @@ class RayBackend:
         self.ray = ray
         if not ray.is_initialized():
             try:
-                ray.init(address=address, num_cpus=None if address else workers, include_dashboard=False, log_to_driver=False)
+                ray.init(
+                    address=address,
+                    num_cpus=None if address else workers,
+                    include_dashboard=False,
+                    log_to_driver=False,
+                    logging_level=logging.ERROR,  # our progress bar, not Ray's start-up chatter
+                )
             except (ConnectionError, RuntimeError, ValueError) as error:
                 first = (str(error).splitlines() or [""])[0][:160]
                 raise WorldagentError(f"cannot join the Ray cluster at {address or 'a new local cluster'} ({first}); check --ray-address.") from None

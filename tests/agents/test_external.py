@@ -213,3 +213,20 @@ def test_search_and_evaluate_random_accept_external_agents(in_module_dir, racing
         app, ["search", "racing", "--agent", "agents_mod:out_of_range", "--generator", str(gen), "--budget", "2", "--out", "bad", "--quiet"]
     )
     assert bad.exit_code == 2 and len(bad.output.strip().splitlines()) == 1 and "actions are integers in [0, 4)" in bad.output
+
+
+@pytest.mark.slow
+def test_a_stable_baselines3_model_plays_through_the_host_evaluator(tmp_path, tracks):
+    """Needs the `sb3` extra (torch); skipped without it."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    from worldagent.envs.adapters import ParticleRacingGym
+
+    model = sb3.PPO("MlpPolicy", ParticleRacingGym(pool_size=4, cache_dir=tmp_path), n_steps=64, batch_size=32, seed=0)
+    model.learn(64)
+    model.save(tmp_path / "ppo.zip")
+    agent = load_agent("racing", tmp_path / "ppo.zip")
+    assert agent.source.kind == "sb3" and agent.host
+    metrics = evaluate(RACING, agent, tracks, 2, jax.random.key(0), SHORT)
+    obs = np.zeros((3, *RACING.observation_shape), np.float32)
+    np.testing.assert_array_equal(agent(obs), model.predict(obs, deterministic=True)[0])
+    assert metrics["steps"].shape == (4, 2) and np.all(metrics["steps"] >= 1)

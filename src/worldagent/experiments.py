@@ -15,6 +15,7 @@ nothing new and a killed one loses nothing it finished.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -375,6 +376,155 @@ def with_world(store: RunStore, evaluation: Evaluation) -> Evaluation:
     return evaluation
 
 
+# -- failure atlas (quality diversity) ----------------------------------------------------------
+
+
+def atlas_campaign_name(maximize: bool, metric: str, seed: int) -> str:
+    """``atlas-min-return-s0``: an atlas's campaign."""
+    return f"atlas-{'max' if maximize else 'min'}-{metric}-s{seed}"
+
+
+def atlas(
+    store: RunStore,
+    setup: Setup,
+    metric: str = "reward",
+    *,
+    maximize: bool = False,
+    budget: int,
+    seed: int = 0,
+    descriptors: Sequence[str] | None = None,
+    cells: int = 10,
+    failure: str | None = None,
+    name: str | None = None,
+    resume: bool = True,
+    progress: bool = True,
+) -> dict:
+    """A failure atlas: the worst (or best) world of every cell of a descriptor grid, by CMA-ME.
+
+    Args:
+        store: the run store; ``setup``: env, agents, generator (and backend).
+        metric: a metric of the env, an alias, or "reward".
+        maximize: look for the highest values (default: the lowest, i.e. failures of a reward).
+        budget: evaluated worlds (rounded up to whole generations of 21).
+        seed: seed of the emitters, the grid's ranges and every episode.
+        descriptors: 1–3 of ``spec.metrics.descriptors`` (default: the spec's defaults).
+        cells: cells per descriptor.
+        failure: a selection (``"crash_rate > 0.5"``) saying which worlds fail, for the count of
+            distinct failing worlds (None: none counted).
+        name: the campaign (default ``atlas_campaign_name``); ``resume`` continues it.
+
+    Returns:
+        ``atlas_summary`` of the campaign.
+    """
+    from worldagent.search.atlas import Grid, QDConfig, QDOptimiser, check_descriptors, describer, grid_ranges
+
+    metric = setup.metric(metric)
+    names, shape = check_descriptors(setup.spec, descriptors, cells, budget)
+    selection = failure_selection(failure, setup.spec.name)
+    describe = describer(setup.spec, setup.generator, names)
+    dim = setup.generator.latent_dim
+    grid = Grid(names, shape, grid_ranges(describe, dim, names, seed))
+    config = QDConfig()
+    optimiser = QDOptimiser(dim, maximize, seed, grid, describe, config)
+    name = name or atlas_campaign_name(maximize, metric, seed)
+    extra = {"atlas": {"grid": grid.record(), **dataclasses.asdict(config)}}
+    spec = CampaignSpec(name, setup.spec.name, metric, maximize, "cma-me", int(budget), int(seed), dim, agent=agent_record(setup.policy), extra=extra)
+    objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
+    run_campaign(store, spec, objective, resume=resume, progress=progress, backend=setup.backend, optimiser=optimiser)
+    return atlas_summary(store, grid, describe, [name], maximize, selection)[name]
+
+
+def atlas_summary(store: RunStore, grid: Any, describe: Any, campaigns: Sequence[str], maximize: bool, failure: Any = None) -> dict:
+    """Each campaign's evaluations on ``grid``: coverage, QD-score and distinct failing worlds.
+
+    Any campaign compares (an atlas, a CMA-ES search, random search): the same grid and the same
+    QD-score offset (the worst score over all the campaigns given) for all.
+
+    Returns:
+        {campaign: {"evaluations", "archive" (``search.atlas.Archive``), "coverage", "qd_score",
+        "failing", "distinct_failing" (None without ``failure``), "grid"}}.
+    """
+    from worldagent.search.atlas import archive_of, distinct_count
+
+    runs = {name: store.evaluations(name) for name in campaigns}
+    finite = [e.score for found in runs.values() for e in found if np.isfinite(e.score)]
+    offset = (min(finite) if maximize else max(finite)) if finite else 0.0
+    summary = {}
+    for name, found in runs.items():
+        scores = np.array([e.score for e in found], np.float64)
+        measures = describe(np.stack([e.latent for e in found])) if found else np.zeros((0, len(grid.cells)))
+        archive = archive_of(grid, scores, measures, maximize)
+        failing = np.flatnonzero(failure.mask(found)) if failure is not None and found else np.zeros(0, int)
+        worlds = [w.world for w in store.iter_evaluations(name, with_worlds=True)] if len(failing) else []
+        summary[name] = {
+            "evaluations": found,
+            "archive": archive,
+            "coverage": archive.coverage(grid),
+            "qd_score": archive.qd_score(offset, maximize),
+            "qd_offset": offset,
+            "failing": int(len(failing)) if failure is not None else None,
+            "distinct_failing": distinct_count([worlds[i] for i in failing if worlds[i] is not None]) if failure is not None else None,
+            "grid": grid,
+            "describe": describe,
+        }
+    return summary
+
+
+def explain_failures(setup: Setup, summary: dict, failure: Any, *, count: int = 3, seed: int = 0) -> dict:
+    """Counterfactual pairs and clusters for an atlas's failing worlds (issue 15, item 3).
+
+    For up to ``count`` failing cells (the lowest first, then far apart), the nearest passing
+    world the atlas evaluated gives a segment in latent space; ``analysis.explanations.boundary``
+    bisects it for the last failing and first passing world. Boundary latents are evaluated with
+    the setup's agent and repeats, each with the episodes its failing world was scored with
+    (``seed`` is the atlas's), and are not stored.
+
+    Returns:
+        {"pairs": [{"boundary": Boundary, "seed": the episodes' seed, "cell_score": float}],
+        "clusters": [analysis.explanations.Cluster] over the failing evaluations,
+        "failing": the failing ``Evaluation`` s the clusters index}.
+    """
+    from worldagent.analysis.explanations import boundary, clusters, nearest
+    from worldagent.search.atlas import distinct_picks
+
+    found, archive = summary["evaluations"], summary["archive"]
+    mask = failure.mask(found) if found else np.zeros(0, bool)
+    failing = [e for e, bad in zip(found, mask) if bad]
+    passing = np.stack([e.latent for e, bad in zip(found, mask) if not bad]) if (~mask).any() else np.zeros((0, setup.generator.latent_dim))
+    objective = LatentObjective(
+        Objective(setup.spec.name, setup.spec.metrics.main, True), setup.env, setup.policy, setup.generator, setup.repeats, setup.params
+    )
+    failing_cells = [i for i in range(len(archive.cells)) if mask[archive.best[i]]]
+    sub = dataclasses.replace(
+        archive,
+        scores=archive.scores[failing_cells],
+        measures=archive.measures[failing_cells],
+        cells=archive.cells[failing_cells],
+        best=archive.best[failing_cells],
+    )
+    pairs = []
+    for pick in distinct_picks(sub, False, count) if len(failing_cells) and len(passing) else []:
+        worst = found[int(sub.best[pick])]
+        # every point of the segment plays the episodes the failing world was scored with, so
+        # the verdict changes only where the world does (not with the episodes' randomness)
+        episodes_seed = evaluation_seed(seed, worst.generation, worst.slot)
+        fails = lambda z, s=episodes_seed: failure.mask(objective(z, np.full(len(z), s)))  # noqa: E731
+        z_pass = passing[nearest(worst.latent, passing)]
+        pairs.append({"boundary": boundary(fails, worst.latent, z_pass), "seed": episodes_seed, "cell_score": float(sub.scores[pick])})
+    latents = np.stack([e.latent for e in failing]) if failing else np.zeros((0, setup.generator.latent_dim))
+    measures = summary["describe"](latents) if failing else np.zeros((0, len(summary["grid"].cells)))
+    return {"pairs": pairs, "clusters": clusters(measures, latents, seed=seed), "failing": failing, "failing_measures": measures}
+
+
+def failure_selection(text: str | None, env: str) -> Any:
+    """The parsed failure event, or None."""
+    if text is None:
+        return None
+    from worldagent.influence.selection import parse_selection
+
+    return parse_selection(text, env)
+
+
 # -- influencing ---------------------------------------------------------------------------------
 
 
@@ -435,3 +585,62 @@ def example_worlds(run_dir: str | Path, spec: EnvSpec | str, count: int = 4) -> 
     worlds, _, values = load_influenced_worlds(run_dir, spec)
     picks = example_indices(values, count)
     return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[picks], worlds)
+
+
+# -- failure probability -------------------------------------------------------------------------
+
+
+def failure_rate(
+    store: RunStore,
+    setup: Setup,
+    event: str,
+    *,
+    method: str = "both",
+    worlds: int = 10_000,
+    importance: Any = None,
+    target_width: float | None = None,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """P(event) for worlds G(z), z ~ N(0, I), by Monte Carlo and/or importance sampling (DESIGN.md "Failure probability").
+
+    Each estimate is one campaign of the store (``analysis.failure_rate.campaign_name``), so a
+    rerun resumes it and a finished one evaluates nothing new.
+
+    Args:
+        store: the run store; ``setup``: env, agents, generator, repeats, backend.
+        event: a selection such as ``"crash_rate > 0.5"`` (``influence.selection``).
+        method: "mc", "is" or "both".
+        worlds: Monte Carlo's worlds, and importance sampling's worlds after its search (at most,
+            with ``target_width``).
+        importance: an ``analysis.failure_rate.ImportanceConfig`` (None: the defaults).
+        target_width: stop once the 95% interval is within ±target_width · P.
+        seed: seed of the latents and episodes.
+
+    Returns:
+        {method: ``Estimate``} for "mc" and/or "is".
+    """
+    from dataclasses import asdict
+    from functools import partial
+
+    from worldagent.analysis import failure_rate as fr
+    from worldagent.influence.selection import parse_selection
+    from worldagent.progress import progress_bar
+
+    methods = fr.methods(method)
+    importance = importance or fr.ImportanceConfig()
+    fr.check_budget(worlds, target_width, importance)
+    selection = parse_selection(event, setup.spec.name)
+    objective = Objective(setup.spec.name, selection.metrics[0], True)
+    outcomes = LatentObjective(objective, setup.env, setup.policy, setup.generator, setup.repeats, setup.params, keep_worlds=False)
+    found = {}
+    for name in methods:
+        total = worlds + (importance.max_rounds * importance.round_worlds if name == "is" else 0)
+        config = {"event": selection.text, "repeats": setup.repeats, "batch": fr.BATCH, "agent": agent_record(setup.policy)}
+        config |= asdict(importance) if name == "is" else {}
+        campaign = store.open_campaign(fr.campaign_name(name, selection.text, seed), setup.spec.name, "margin", True, name, total, seed, config, True)
+        with progress_bar(f"{name}: P({selection.describe()})", total=total, enabled=progress) as advance:
+            evaluate = fr.StoredEvaluate(store, campaign, outcomes, partial(fr.score_worlds, selection), setup.backend, advance)
+            estimator = partial(fr.importance_sampling, config=importance) if name == "is" else fr.monte_carlo
+            found[name] = estimator(evaluate, setup.generator.latent_dim, worlds, seed=seed, batch=fr.BATCH, target_width=target_width)
+    return found

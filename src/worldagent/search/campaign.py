@@ -66,6 +66,7 @@ class CampaignSpec:
             share per worker of a Ray backend).
         agent: what the agent is (``policy.agent_record``: kind, path, file hash), kept in the
             campaign's config; a campaign is resumed only with an agent of the same files.
+        extra: more settings kept in the config (e.g. an atlas's grid); resuming needs the same.
     """
 
     name: str
@@ -79,6 +80,7 @@ class CampaignSpec:
     config: OptimiserConfig = OptimiserConfig()
     chunk: int = 0
     agent: dict | None = None
+    extra: dict | None = None
 
     def validate(self) -> None:
         if self.budget < 1:
@@ -108,10 +110,13 @@ def run_campaign(
     resume: bool = False,
     progress: bool = True,
     backend: Any = None,
+    optimiser: Any = None,
 ) -> list[Evaluation]:
     """Run (or resume) a campaign to its budget; returns all its evaluations in order.
 
     ``backend`` (``evaluation.backends``; default local) runs each generation's batches.
+    ``optimiser``: a fresh optimiser built by the caller (e.g. the atlas's ``QDOptimiser``);
+    default ``make_optimiser(spec.optimiser, ...)``.
     """
     spec.validate()
     backend = backend or LocalBackend()
@@ -123,11 +128,11 @@ def run_campaign(
         spec.optimiser,
         spec.budget,
         spec.seed,
-        {"dim": spec.dim, **asdict(spec.config), **({"agent": spec.agent} if spec.agent else {})},
+        {"dim": spec.dim, **asdict(spec.config), **({"agent": spec.agent} if spec.agent else {}), **(spec.extra or {})},
         resume,
     )
     stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
-    optimiser = make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, spec.config)
+    optimiser = optimiser or make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, spec.config)
     done, generation = 0, 0
     pick = max if spec.maximize else min
     best = pick([e.score for e in stored.values() if np.isfinite(e.score)], default=float("nan"))
@@ -135,7 +140,7 @@ def run_campaign(
         f"{spec.optimiser} {'max' if spec.maximize else 'min'}imising {spec.objective}", total=spec.budget, enabled=progress
     ) as advance:
         while done < spec.budget:
-            z = optimiser.ask(optimiser.batch_size if spec.optimiser == "cmaes" else min(optimiser.batch_size, spec.budget - done))
+            z = optimiser.ask(optimiser.batch_size if optimiser.whole_generations else min(optimiser.batch_size, spec.budget - done))
             scores = np.full(len(z), np.nan)
             missing = []
             for slot, latent in enumerate(z):

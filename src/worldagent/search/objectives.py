@@ -51,7 +51,8 @@ def episode_records(metrics: dict[str, np.ndarray], world: int) -> list[dict]:
 
 
 @jax.jit
-def _generate(generator, z):
+def generate(generator, z):
+    """G(z) for a batch of latents, jitted once per batch size (shared by every campaign)."""
     return generator(z)
 
 
@@ -77,7 +78,7 @@ class LatentObjective:
 
     def __call__(self, z: np.ndarray, seeds: np.ndarray) -> list[Outcome]:
         self.generator.check_latents(np.asarray(z))
-        worlds = _generate(self.generator, jnp.asarray(z, jnp.float32))
+        worlds = generate(self.generator, jnp.asarray(z, jnp.float32))
         keys = jnp.stack([jax.random.split(jax.random.key(int(seed)), self.repeats) for seed in seeds])
         metrics = evaluate(self.env, self.policy, worlds, self.repeats, None, self.params, keys=keys)
         metrics = self.spec.metrics.with_derived(metrics, self.params)

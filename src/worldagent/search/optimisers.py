@@ -63,6 +63,7 @@ class Optimiser:
     """Base class: direction, dimension, the finite-score check and the round size."""
 
     name = "optimiser"
+    whole_generations = False  # asks only whole batches (a campaign's budget rounds up to them)
 
     def __init__(self, dim: int, maximize: bool, seed: int):
         if dim < 1:
@@ -102,6 +103,7 @@ class CMAES(Optimiser):
     """CMA-ES (pycma) from mean 0; sampling from our own generator, so runs are reproducible."""
 
     name = "cmaes"
+    whole_generations = True
 
     def __init__(self, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()):
         super().__init__(dim, maximize, seed)

@@ -1,0 +1,92 @@
+"""``worldagent atlas ENV``: a failure atlas, the worst world of every kind of world (quality diversity)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from worldagent.commands.console import console, friendly_errors
+from worldagent.commands.options import (
+    AGENT_HELP,
+    GENERATOR_HELP,
+    backend,
+    backend_flag,
+    env_argument,
+    env_options,
+    metric_help,
+    option_flag,
+    ray_address_flag,
+    stochastic_flag,
+)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``worldagent atlas``."""
+
+    @app.command()
+    @friendly_errors
+    def atlas(
+        env: str = env_argument(),
+        agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
+        generator: Path = typer.Option(..., "--generator", help=GENERATOR_HELP),
+        objective: str = typer.Option("reward", "--objective", help=metric_help()),
+        minimize: bool = typer.Option(True, "--minimize/--maximize", help="Keep each cell's lowest (failures) or highest value."),
+        budget: int = typer.Option(2100, "--budget", help="Worlds to evaluate (whole generations of 21)."),
+        descriptors: str = typer.Option(None, "--descriptors", help="1-3 comma-separated world descriptors (`worldagent envs` lists them)."),
+        cells: int = typer.Option(10, "--cells", help="Cells per descriptor."),
+        failure: str = typer.Option(None, "--failure", help='Which worlds fail, e.g. "crash_rate > 0.5", to count distinct failing worlds.'),
+        repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the emitters, the grid and every episode."),
+        out: Path = typer.Option(Path("runs/atlas"), "--out", help="Run directory (store.sqlite and atlas PNG); a rerun resumes."),
+        option: list[str] = option_flag(),
+        stochastic: bool = stochastic_flag(),
+        backend_name: str = backend_flag(),
+        ray_address: str = ray_address_flag(),
+        explain: bool = typer.Option(True, "--explain/--no-explain", help="With --failure: nearest passing worlds and failure groups."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    ) -> None:
+        """The worst (or best) world of every cell of a descriptor grid, found by CMA-ME, drawn as a heat map."""
+        from worldagent import experiments
+        from worldagent.reports.atlas import atlas_figure, counterfactual_figure
+        from worldagent.store import RunStore
+
+        names = [n.strip() for n in descriptors.split(",")] if descriptors else None
+        setup = experiments.setup(
+            env,
+            agent,
+            generator,
+            options=env_options(env, option),
+            stochastic=stochastic,
+            repeats=repeats,
+            backend=backend(backend_name, ray_address),
+        )
+        with RunStore(out) as store:
+            found = experiments.atlas(
+                store,
+                setup,
+                objective,
+                maximize=not minimize,
+                budget=budget,
+                seed=seed,
+                descriptors=names,
+                cells=cells,
+                failure=failure,
+                progress=not quiet,
+            )
+            name = found["evaluations"][0].campaign
+            loaded = lambda e: (experiments.with_world(store, e), experiments.scored_keys_of(store, e))  # noqa: E731
+            figure = atlas_figure(found, setup, setup.metric(objective), not minimize, loaded, out / f"{name}.png")
+        grid = found["grid"]
+        failing = "" if found["distinct_failing"] is None else f"; {found['failing']} failing worlds, {found['distinct_failing']} distinct"
+        console.print(
+            f"{name}: {len(found['evaluations'])} worlds on a {'x'.join(map(str, grid.cells))} grid of {', '.join(grid.descriptors)}; "
+            f"coverage {found['coverage']:.2f}, QD-score {found['qd_score']:.4g}{failing} -> {figure}"
+        )
+        if failure and explain:
+            explained = experiments.explain_failures(setup, found, experiments.failure_selection(failure, env), seed=seed)
+            pairs = counterfactual_figure(setup, explained["pairs"], out / f"{name}-counterfactuals.png")
+            for number, cluster in enumerate(explained["clusters"], 1):
+                centre = ", ".join(f"{n} {v:.3g}" for n, v in zip(grid.descriptors, cluster.centre))
+                console.print(f"  failure group {number}: {len(cluster.members)} worlds around {centre}")
+            console.print(f"  {len(explained['pairs'])} failing worlds beside their nearest passing world -> {pairs}")

@@ -1,0 +1,114 @@
+"""The failure atlas figure: the archive as a heat map, and the worst worlds of distinct cells.
+
+Top: the descriptor grid, each filled cell coloured by the metric of its best (for a
+minimising atlas: worst) world; empty cells stay white. With three descriptors the first two
+are drawn and each square shows the most extreme value over the third. Below: up to ``count``
+cells chosen far apart in descriptor space among the most extreme ones, each world replayed
+with the episodes the campaign scored it with and drawn as the environment draws trajectories.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from worldagent.evaluation.trajectories import replay, scored_keys
+from worldagent.files import write_atomically
+from worldagent.search.atlas import distinct_picks
+
+
+def heat_grid(archive: Any, grid: Any, maximize: bool) -> np.ndarray:
+    """f64[cells_0, cells_1]: each (first two descriptors) cell's extreme score, NaN where empty."""
+    shape = tuple(grid.cells) + (1,) * (2 - len(grid.cells))
+    index = np.unravel_index(archive.cells, grid.cells)
+    flat = np.full(shape[:2], np.nan)
+    for i, score in enumerate(archive.scores):
+        row, col = index[0][i], index[1][i] if len(grid.cells) > 1 else 0
+        current = flat[row, col]
+        if np.isnan(current) or (score > current if maximize else score < current):
+            flat[row, col] = score
+    return flat
+
+
+def atlas_figure(summary: dict, setup: Any, metric: str, maximize: bool, loaded: Any, out: Path | str, count: int = 4) -> Path:
+    """Draw an atlas (``experiments.atlas``'s result) to ``out`` (PNG).
+
+    Args:
+        summary: one campaign's entry of ``experiments.atlas_summary``.
+        setup: ``experiments.Setup`` (env, policy, params; the worlds are replayed).
+        metric: the archive's metric; ``maximize`` its direction.
+        loaded: ``evaluation -> (evaluation with its world, [repeats] keys it was scored with)``.
+        count: worlds drawn below the heat map.
+    """
+    from worldagent.reports.figures import _pyplot
+
+    plt = _pyplot()
+    grid, archive, spec = summary["grid"], summary["archive"], setup.spec
+    picks = distinct_picks(archive, maximize, count) if spec.pictures.episodes is not None else []
+    figure = plt.figure(figsize=(4.2 * max(len(picks), 2), 8.4), dpi=110)
+    figure.subplots_adjust(hspace=0.35)
+    top = figure.add_subplot(2, 1, 1)
+    heat = heat_grid(archive, grid, maximize)
+    (x_low, x_high), (y_low, y_high) = grid.ranges[0], grid.ranges[1] if len(grid.ranges) > 1 else (0.0, 1.0)
+    shown = top.imshow(heat.T, origin="lower", aspect="auto", extent=(x_low, x_high, y_low, y_high), cmap="viridis_r" if not maximize else "viridis")
+    figure.colorbar(shown, ax=top, label=f"{metric} ({'best' if maximize else 'worst'} world of the cell)")
+    top.set_xlabel(grid.descriptors[0])
+    top.set_ylabel(grid.descriptors[1] if len(grid.descriptors) > 1 else "")
+    failing = "" if summary["distinct_failing"] is None else f"; {summary['distinct_failing']} distinct failing worlds"
+    top.set_title(
+        f"{spec.name} failure atlas: {len(archive.cells)} of {grid.size} cells filled (coverage {summary['coverage']:.2f}), "
+        f"QD-score {summary['qd_score']:.4g}{failing}",
+        fontsize=9,
+    )
+    evaluations = summary["evaluations"]
+    for slot, pick in enumerate(picks):
+        evaluation, keys = loaded(evaluations[int(archive.best[pick])])
+        axis = figure.add_subplot(2, len(picks), len(picks) + slot + 1)
+        world = spec.world_from_arrays(evaluation.world)
+        episodes = replay(spec, setup.env, setup.policy, world, keys, setup.params)
+        spec.pictures.episodes(axis, world, episodes)
+        top.scatter(*archive.measures[pick][:2], marker="o", s=90, facecolors="none", edgecolors="red")
+        top.annotate(str(slot + 1), archive.measures[pick][:2], color="red", fontsize=9, xytext=(4, 4), textcoords="offset points")
+        described = ", ".join(f"{n} {v:.3g}" for n, v in zip(grid.descriptors, archive.measures[pick]))
+        axis.set_title(f"{slot + 1}: score {archive.scores[pick]:.4g}\n{described}", fontsize=8)
+        axis.set_xticks([])
+        axis.set_yticks([])
+    path = write_atomically(Path(out), lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
+    plt.close(figure)
+    return path
+
+
+def counterfactual_figure(setup: Any, pairs: list[dict], out: Path | str) -> Path:
+    """Each failing world beside the nearest passing one on its segment (``experiments.explain_failures``),
+    both replayed with the episodes the failing world was scored with and drawn with the env's
+    trajectories (racing marks each crash: the step where the episode fails)."""
+    import jax
+    import jax.numpy as jnp
+
+    from worldagent.reports.figures import _pyplot
+    from worldagent.search.objectives import generate
+
+    plt = _pyplot()
+    spec = setup.spec
+    figure, axes = plt.subplots(max(len(pairs), 1), 2, figsize=(8.4, 4.2 * max(len(pairs), 1)), dpi=100, squeeze=False)
+    for row, pair in enumerate(pairs):
+        found = pair["boundary"]
+        latents = jnp.asarray(np.stack([found.failing, found.passing]), jnp.float32)
+        worlds = jax.tree_util.tree_map(np.asarray, generate(setup.generator, latents))
+        for col, (label, t) in enumerate((("fails", found.t_failing), ("passes", found.t_passing))):
+            world = jax.tree_util.tree_map(lambda leaf, col=col: leaf[col], worlds)
+            episodes = replay(spec, setup.env, setup.policy, world, scored_keys(pair["seed"], setup.repeats), setup.params)
+            axis = axes[row, col]
+            spec.pictures.episodes(axis, world, episodes)
+            note = spec.episode_note({k: np.asarray(v) for k, v in episodes.metrics.items()}) if spec.episode_note else ""
+            axis.set_title(f"{row + 1}{'ab'[col]}: {label} (t = {t:.3f} on the segment){note}", fontsize=8)
+            axis.set_xticks([])
+            axis.set_yticks([])
+    if not pairs:
+        axes[0, 0].set_title("no failing cell with a passing world to compare", fontsize=9)
+    figure.suptitle(f"{spec.name}: each failing world beside the nearest passing one (latent segment bisected)", fontsize=9)
+    path = write_atomically(Path(out), lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
+    plt.close(figure)
+    return path

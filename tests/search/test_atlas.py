@@ -1,0 +1,132 @@
+"""The failure atlas: grid bookkeeping, descriptors, CMA-ME campaigns that resume, the command."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from worldagent import experiments
+from worldagent.cli import app
+from worldagent.envs import registry
+from worldagent.errors import WorldagentError
+from worldagent.search.atlas import Grid, archive_of, cell_of, check_descriptors, distinct_count
+from worldagent.store import RunStore
+
+GRID = Grid(("a", "b"), (2, 3), ((0.0, 1.0), (0.0, 3.0)))
+
+
+def test_cells_are_row_major_and_values_outside_the_ranges_land_on_the_edges():
+    measures = np.array([[0.1, 0.5], [0.9, 2.5], [-5.0, 99.0], [0.5, 1.0]])
+    np.testing.assert_array_equal(cell_of(GRID, measures), [0, 5, 2, 4])
+
+
+def test_each_cell_keeps_its_best_world_the_earliest_on_ties_and_no_nan():
+    measures = np.array([[0.1, 0.5], [0.2, 0.4], [0.1, 0.6], [0.9, 2.5], [0.9, 2.6]])
+    scores = np.array([3.0, 1.0, 1.0, np.nan, 7.0])
+    low = archive_of(GRID, scores, measures, maximize=False)
+    np.testing.assert_array_equal(low.cells, [0, 5])
+    np.testing.assert_array_equal(low.best, [1, 4])  # 1.0 twice in cell 0: the earlier; NaN ignored in cell 5
+    assert low.coverage(GRID) == pytest.approx(2 / 6)
+    assert low.qd_score(offset=10.0, maximize=False) == pytest.approx((10 - 1) + (10 - 7))
+    high = archive_of(GRID, scores, measures, maximize=True)
+    np.testing.assert_array_equal(high.best, [0, 4])
+
+
+def test_distinct_worlds_are_counted_by_content():
+    a, b = {"x": np.arange(3)}, {"x": np.arange(3) + 1}
+    assert distinct_count([a, dict(a), b]) == 2
+
+
+def test_racing_descriptors_on_hand_made_tracks():
+    spec = registry.get("racing")
+    angle = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    circle = SimpleNamespace(centreline=np.stack([0.5 * np.cos(angle), 0.5 * np.sin(angle)], axis=1))
+    square = SimpleNamespace(
+        centreline=np.array(
+            [[x, -0.5] for x in np.linspace(-0.5, 0.5, 64, endpoint=False)]
+            + [[0.5, y] for y in np.linspace(-0.5, 0.5, 64, endpoint=False)]
+            + [[x, 0.5] for x in np.linspace(0.5, -0.5, 64, endpoint=False)]
+            + [[-0.5, y] for y in np.linspace(0.5, -0.5, 64, endpoint=False)]
+        )
+    )
+    describe = spec.metrics.descriptors
+    assert describe["total_curvature"](circle) == pytest.approx(2 * np.pi, rel=1e-6)
+    assert describe["total_curvature"](square) == pytest.approx(2 * np.pi, rel=1e-6)
+    assert describe["sharpest_corner"](square) == pytest.approx(np.pi / 2, rel=1e-6)
+    assert describe["sharpest_corner"](circle) < 0.5
+    assert describe["track_length"](circle) == pytest.approx(np.pi, rel=1e-3)
+    assert describe["track_length"](square) == pytest.approx(4.0, rel=1e-6)
+
+
+def test_bad_atlas_input_gets_one_line_errors():
+    spec = registry.get("racing")
+    for names, cells, budget, message in [
+        (("curvy",), 10, 2100, "unknown descriptor 'curvy' for racing; use some of: total_curvature"),
+        (("total_curvature", "total_curvature"), 10, 2100, "pick 1 to 3 different ones"),
+        (None, 10, 42, "--budget 42 is smaller than the grid's 100 cells"),
+        (None, 1, 2100, "at least 2 cells"),
+    ]:
+        with pytest.raises(WorldagentError, match=message) as error:
+            check_descriptors(spec, names, cells, budget)
+        assert "\n" not in str(error.value)
+    assert check_descriptors(spec, None, 5, 100) == (("total_curvature", "sharpest_corner"), (5, 5))
+
+
+def test_a_killed_atlas_resumes_to_the_same_archive(tmp_path, racing_generator):
+    setup = experiments.setup("racing", "driver", racing_generator, repeats=1)
+    common = dict(maximize=False, seed=1, cells=4, progress=False, failure="return < 50")
+    with RunStore(tmp_path / "whole") as store:
+        whole = experiments.atlas(store, setup, "reward", budget=63, **common)
+    with RunStore(tmp_path / "killed") as store:
+        experiments.atlas(store, setup, "reward", budget=21, **common)  # stopped after one generation
+        resumed = experiments.atlas(store, setup, "reward", budget=63, **common)
+    assert len(resumed["evaluations"]) == len(whole["evaluations"]) == 63
+    assert [e.latent.tolist() for e in resumed["evaluations"]] == [e.latent.tolist() for e in whole["evaluations"]]
+    np.testing.assert_array_equal(resumed["archive"].cells, whole["archive"].cells)
+    np.testing.assert_array_equal(resumed["archive"].scores, whole["archive"].scores)
+    assert resumed["coverage"] > 0.25 and resumed["distinct_failing"] == whole["distinct_failing"]
+    with RunStore(tmp_path / "whole") as store:
+        assert store.campaign("atlas-min-return-s1").config["atlas"]["grid"]["descriptors"] == ["total_curvature", "sharpest_corner"]
+
+
+def test_the_atlas_command_draws_the_archive(tmp_path, racing_vae, racing_data, racing_generator):
+    from PIL import Image
+
+    from worldagent.worlds.generator import save_generator
+
+    gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
+    args = ["atlas", "racing", "--agent", "driver", "--generator", str(gen), "--budget", "42", "--cells", "3", "--repeats", "1"]
+    result = CliRunner().invoke(app, [*args, "--failure", "crash_rate > 0.5", "--out", str(tmp_path / "run"), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "atlas-min-return-s0: 42 worlds on a 3x3 grid of total_curvature, sharpest_corner" in result.output
+    assert Image.open(tmp_path / "run" / "atlas-min-return-s0.png").size[0] > 800
+    bad = CliRunner().invoke(app, [*args, "--descriptors", "wall_share", "--out", str(tmp_path / "bad")])
+    assert bad.exit_code == 2 and "unknown descriptor 'wall_share' for racing" in bad.output
+
+
+def test_failures_are_explained_by_nearest_passing_worlds_and_groups(tmp_path, racing_generator):
+    from worldagent.evaluation.trajectories import scored_keys
+    from worldagent.reports.atlas import counterfactual_figure
+
+    setup = experiments.setup("racing", "driver", racing_generator, repeats=2)
+    with RunStore(tmp_path) as store:
+        found = experiments.atlas(store, setup, "reward", budget=42, seed=0, cells=3, progress=False)
+    median = float(np.median([e.score for e in found["evaluations"]]))
+    failure = experiments.failure_selection(f"return < {median}", "racing")
+    explained = experiments.explain_failures(setup, found, failure, count=2)
+    assert sum(len(c.members) for c in explained["clusters"]) == len(explained["failing"]) >= 1
+    assert 1 <= len(explained["pairs"]) <= 2
+    for pair in explained["pairs"]:
+        edge = pair["boundary"]
+        assert 0.0 <= edge.t_failing < edge.t_passing <= 1.0 and edge.evaluated == 21
+        # with the failing world's own episodes, its end of the bracket fails and the other passes
+        z = np.stack([edge.failing, edge.passing])
+        outcomes = experiments.LatentObjective(
+            experiments.Objective("racing", "return", True), setup.env, setup.policy, setup.generator, 2, setup.params
+        )(z, np.full(2, pair["seed"]))
+        np.testing.assert_array_equal(failure.mask(outcomes), [True, False])
+        assert len(scored_keys(pair["seed"], 2)) == 2
+    assert counterfactual_figure(setup, explained["pairs"], tmp_path / "pairs.png").stat().st_size > 10_000

@@ -442,7 +442,7 @@ def atlas_summary(store: RunStore, grid: Any, describe: Any, campaigns: Sequence
 
     Returns:
         {campaign: {"evaluations", "archive" (``search.atlas.Archive``), "coverage", "qd_score",
-        "failing", "distinct_failing" (None without ``failure``), "grid"}}.
+        "failing", "distinct_failing" (None without ``failure``), "qd_offset", "grid", "describe"}}.
     """
     from worldagent.search.atlas import archive_of, distinct_count
 
@@ -482,7 +482,8 @@ def explain_failures(setup: Setup, summary: dict, failure: Any, *, count: int = 
     Returns:
         {"pairs": [{"boundary": Boundary, "seed": the episodes' seed, "cell_score": float}],
         "clusters": [analysis.explanations.Cluster] over the failing evaluations,
-        "failing": the failing ``Evaluation`` s the clusters index}.
+        "failing": the failing ``Evaluation`` s the clusters index, "failing_measures": their
+        descriptors f64[n, k]}.
     """
     from worldagent.analysis.explanations import boundary, clusters, nearest
     from worldagent.search.atlas import distinct_picks

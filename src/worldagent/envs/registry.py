@@ -154,6 +154,9 @@ class EnvSpec:
         presets: ``preset name -> {budget field: value}``: the budgets of ``worldagent reproduce``.
         reproduce_options: the ``make`` options ``worldagent reproduce`` uses (harvest: tagger 0).
         selection: the paper's influencing selection (``"crash_rate > 0.5"``).
+        failure: the event that counts as a failure by default (the selection grammar): the
+            failing threshold of ``worldagent atlas`` and the event of ``failure-rate`` in
+            ``worldagent reproduce`` ("" where the env names none).
         paper: the paper's figures, for the report's "ours vs paper" table (key -> value).
         episode_note: ``episodes' metrics {name: [E]} -> str``: a few words on how episodes ended.
         raw_decode: ``logits f32[B, D] -> worlds`` without repair (thresholded cells), for the
@@ -178,6 +181,7 @@ class EnvSpec:
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     reproduce_options: Mapping[str, Any] = field(default_factory=dict)
     selection: str = ""
+    failure: str = ""
     paper: Mapping[str, float] = field(default_factory=dict)
     episode_note: Callable[[dict], str] | None = None
     raw_decode: Callable[[Any], Any] | None = None

@@ -30,7 +30,7 @@ from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
 PHASES = ("dataset", "generator", "agent", "random", "strategic", "compare", "influence")
-OPTIONAL_BUDGETS = ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts")  # 0 / None allowed
+OPTIONAL_BUDGETS = ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts", "atlas_budget", "failure_worlds")  # 0 / None allowed
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,9 @@ class EnvBudgets:
         vae_epochs: VAE training epochs (ours: 25).
         episodes: training episodes of the agents (paper §5.3: racing 10,000, harvest 5,000).
         train_envs: environments stepped in parallel while training (0: the algorithm's default).
+        atlas_budget: worlds the failure atlas's CMA-ME search evaluates (ours; 0 skips the atlas phase).
+        failure_worlds: worlds Monte Carlo and importance sampling each sample to estimate the
+            probability of ``spec.failure`` in the atlas phase (ours).
         learning_starts: harvest DQN: transitions per agent before learning (None: the default).
         random_worlds: worlds z ~ N(0, I) of the random evaluation (paper §6.1.1: 1,000).
         strategic_budget: worlds each CMA-ES search (min, max) may evaluate (ours).
@@ -82,6 +85,8 @@ class EnvBudgets:
     bo_budget: int = 0
     train_envs: int = 0
     learning_starts: int | None = None
+    atlas_budget: int = 0
+    failure_worlds: int = 0
 
 
 @dataclass(frozen=True)

@@ -202,6 +202,8 @@ SPEC = register(
                 influence_episodes=5_000,
                 influence_eval_worlds=1_000,
                 influence_seeds=(0, 1, 2),
+                atlas_budget=1_050,
+                failure_worlds=2_000,
                 influence_search_budget=525,
             ),
             "quick": _budgets(
@@ -217,6 +219,8 @@ SPEC = register(
                 influence_episodes=1_000,  # at 400 the tagger has barely learnt to tag (docs/harvest.md)
                 influence_eval_worlds=50,
                 influence_seeds=(0,),
+                atlas_budget=105,
+                failure_worlds=200,
                 influence_search_budget=210,
                 learning_starts=4_000,
             ),
@@ -232,6 +236,8 @@ SPEC = register(
                 influence_episodes=4,
                 influence_eval_worlds=4,
                 influence_seeds=(0,),
+                atlas_budget=105,
+                failure_worlds=16,
                 train_envs=4,
                 learning_starts=1_000,
             ),
@@ -239,6 +245,7 @@ SPEC = register(
         reproduce_options={"tagger": (0,)},
         raw_decode=lambda logits: threshold_maps(np.asarray(logits).reshape(len(logits), 2, DEFAULT_SIZE, DEFAULT_SIZE)),
         selection="conflict == 0",
+        failure="group_reward < 50",  # ours: under a third of trained agents' mean group reward on random worlds (130-200)
         paper={
             "random.mean_normalised": 0.61,
             "min.normalised": 0.05,

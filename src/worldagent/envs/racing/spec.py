@@ -158,6 +158,8 @@ SPEC = register(
                 influence_episodes=10_000,
                 influence_eval_worlds=1_000,
                 influence_seeds=(0, 1, 2),
+                atlas_budget=2_100,
+                failure_worlds=10_000,
                 influence_selection="crash_rate > 0",
             ),
             "quick": _budgets(
@@ -173,6 +175,8 @@ SPEC = register(
                 influence_episodes=10_000,
                 influence_eval_worlds=200,
                 influence_seeds=(0,),
+                atlas_budget=420,
+                failure_worlds=2_000,
                 influence_selection="crash_rate > 0",
             ),
             "tiny": _budgets(
@@ -188,10 +192,13 @@ SPEC = register(
                 influence_episodes=64,
                 influence_eval_worlds=10,
                 influence_seeds=(0,),
+                atlas_budget=105,
+                failure_worlds=64,
                 train_envs=8,
             ),
         },
         selection="crash_rate > 0.5",
+        failure="crash_rate > 0.5",  # the paper's crash-prone worlds (§6.2.1)
         paper={
             "random.mean_normalised": 0.87,
             "random.crashed": 0.11,

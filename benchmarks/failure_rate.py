@@ -1,0 +1,243 @@
+"""Failure probability: Monte Carlo and importance sampling against brute force (issue 15, item 2).
+
+    python benchmarks/failure_rate.py [--width 0.5] [--envs racing harvest] [--scale 1.0]
+
+For each env a scripted agent plays on a small generator trained here, scored by a metric whose
+tail is spread finely enough to hold events of probability 1e-2, 1e-3 and 1e-4 (``ENVS``):
+
+- racing: ``driver``, ``steps > t`` (the slowest laps, and laps not finished in time). The
+  driver and the env are deterministic given the world, so one episode per world is exact.
+  ``return`` does not serve: its low tail is a handful of crash tracks each of mass ~1e-3.
+- harvest: ``greedy``, ``sustainability < t`` (apples taken early: the map is stripped). Its
+  ``group_reward`` takes ~20 values with a floor holding >10% of the worlds. One episode per
+  world (not the paper's 8, to afford the brute force); the event is about that episode, for
+  every method alike. Harvest episodes cost ~25x racing's on this CPU, so its brute force and
+  Monte Carlo's cap are smaller.
+
+1. **Brute force.** ``worlds`` worlds z ~ N(0, I). Thresholds t between two distinct values of
+   the metric, with tail fractions closest to 1e-2, 1e-3 and 1e-4; the brute-force fraction, with
+   its exact binomial interval, is the reference.
+2. **Monte Carlo to a width.** ``analysis.failure_rate.monte_carlo`` with ``target_width``: worlds
+   in batches of 1,000 until the 95% interval is within ±width·P (and 10 hits), at most
+   ``mc_cap`` worlds. Beside it, the worlds Monte Carlo needs in expectation at the brute-force P
+   (the Clopper–Pearson width at k = nP).
+3. **Importance sampling to a width.** ``importance_sampling`` likewise, the search included.
+4. **Monte Carlo at importance sampling's cost**: its interval with the same episodes.
+
+Both estimators run through one array evaluator: G(z), the jitted local evaluator with the keys
+a campaign gives (``evaluation_seed``), per-world means, ``score_means``; nothing is stored (the
+store's writes, not the method, would dominate the time). ``--scale`` multiplies every world
+count (0.05 for a smoke run). Writes ``benchmarks/results/failure-rate.json`` with the machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import RESULTS, describe_machine  # noqa: E402
+from worldagent import experiments  # noqa: E402
+from worldagent.analysis import failure_rate as fr  # noqa: E402
+from worldagent.evaluation.local import evaluate  # noqa: E402
+from worldagent.files import write_text  # noqa: E402
+from worldagent.influence.selection import parse_selection  # noqa: E402
+from worldagent.worlds.dataset import make_dataset  # noqa: E402
+from worldagent.worlds.generator import build_generator  # noqa: E402
+from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
+
+ENVS = {
+    "racing": {"agent": "driver", "metric": "steps", "op": ">", "repeats": 1, "worlds": 400_000, "mc_cap": 400_000, "dataset": 2048, "epochs": 40},
+    "harvest": {
+        "agent": "greedy",
+        "metric": "sustainability",
+        "op": "<",
+        "repeats": 1,
+        "worlds": 40_000,
+        "mc_cap": 10_000,
+        "dataset": 512,
+        "epochs": 30,
+    },
+}
+PROBABILITIES = (1e-2, 1e-3, 1e-4)
+CHUNK = 10_000  # worlds per evaluator call in the brute force
+
+
+def small_generator(env: str, size: int, epochs: int):
+    """A generator trained here in seconds (the tests' small VAE on ``size`` worlds).
+
+    ``external_agents.small_generator``'s 5 epochs leave the posterior at the prior: G(z) is then
+    nearly one world. With 512 tracks and 30 epochs racing has ~500 distinct tracks in 20,000
+    draws; with 2,048 and 40, ~1,900.
+    """
+    data = make_dataset(env, size, 0, progress=False)
+    config = VAEConfig(encoder=(128, 64), decoder=(64, 128), epochs=epochs, batch_size=32, learning_rate=2e-3, warmup_epochs=2)
+    return build_generator(train_vae(data, config, progress=False), data)
+
+
+def metric_means(setup, metric: str):
+    """``(z f64[n, dim], seeds int[n]) -> f64[n]``: ``metric`` averaged over each world's episodes, keyed as campaigns key them."""
+    generate = jax.jit(lambda generator, z: generator(z))
+    world_keys = jax.jit(jax.vmap(lambda seed: jax.random.split(jax.random.key(seed), setup.repeats)))
+
+    def means(z: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+        worlds = generate(setup.generator, jnp.asarray(z, jnp.float32))
+        keys = world_keys(jnp.asarray(seeds, jnp.uint32))
+        metrics = setup.spec.metrics.with_derived(
+            evaluate(setup.env, setup.policy, worlds, setup.repeats, None, setup.params, keys=keys), setup.params
+        )
+        return np.asarray(metrics[metric], np.float64).mean(axis=1)
+
+    return means
+
+
+def brute_force(means, dim: int, worlds: int, seed: int) -> np.ndarray:
+    """f64[worlds]: the metric's per-world means on ``worlds`` worlds z ~ N(0, I) (their own stream and seeds)."""
+    rng = np.random.default_rng([seed, 99])
+    chunks = []
+    for start in range(0, worlds, CHUNK):
+        n = min(CHUNK, worlds - start)
+        chunks.append(means(rng.standard_normal((n, dim)), rng.integers(0, 2**31, n)))
+    return np.concatenate(chunks)
+
+
+def mc_worlds_for_width(p: float, width: float) -> int | None:
+    """Worlds Monte Carlo needs, in expectation, for a Clopper–Pearson interval within ±width·p (k = round(n p))."""
+    if p <= 0:
+        return None
+    n = 16
+    while True:
+        k = max(1, round(n * p))
+        low, high = fr.clopper_pearson(k, n)
+        if (high - low) / (2 * k / n) <= width:
+            return n
+        n = int(n * 1.05) + 1
+
+
+def threshold_for(values: np.ndarray, p: float, op: str) -> float:
+    """Halfway between two distinct ``values`` f64[n], where the fraction below (``<``) or above (``>``) is closest to p, to 9 digits."""
+    distinct = np.unique(values)
+    middles = (distinct[:-1] + distinct[1:]) / 2
+    below = np.searchsorted(np.sort(values), middles) / len(values)
+    tail = below if op == "<" else 1 - below
+    return float(f"{middles[np.argmin(np.abs(np.log(tail / p)))]:.9g}")
+
+
+def run_event(means, setup, selection, reference: dict, mc_cap: int, args) -> dict:
+    """Monte Carlo and importance sampling of the event to ``--width``, and Monte Carlo at IS's cost."""
+    metric = selection.metrics[0]
+    dim = setup.generator.latent_dim
+
+    def scored(z, seeds):
+        return fr.score_means(selection, {metric: means(z, seeds)}, len(z) * setup.repeats)
+
+    row = {"event": selection.text}
+    for name, estimator in (("mc", fr.monte_carlo), ("is", fr.importance_sampling)):
+        start = time.perf_counter()
+        cap = mc_cap if name == "mc" else args.is_cap
+        try:
+            estimate = estimator(scored, dim, cap, seed=args.seed, target_width=args.width)
+        except Exception as error:  # an IS search that found nothing is a result too
+            row[name] = {"error": str(error)}
+            continue
+        row[name] = {
+            **estimate.as_dict(),
+            "seconds": round(time.perf_counter() - start, 1),
+            "reached_width": estimate.relative_half_width <= args.width,
+            "covers_brute_force": estimate.low <= reference["estimate"] <= estimate.high,
+            "estimate_inside_brute_force_interval": reference["low"] <= estimate.estimate <= reference["high"],
+        }
+    if "worlds" in row["is"]:
+        same = fr.monte_carlo(scored, dim, row["is"]["worlds"], seed=args.seed + 1)
+        row["mc_at_is_cost"] = {**same.as_dict(), "covers_brute_force": same.low <= reference["estimate"] <= same.high}
+        row["mc_expected_worlds_for_width"] = mc_worlds_for_width(reference["estimate"], args.width)
+        needed = row["mc_expected_worlds_for_width"]
+        row["episode_ratio_mc_over_is"] = None if needed is None else round(needed * setup.repeats / row["is"]["episodes"], 1)
+    return row
+
+
+def run_env(env: str, args) -> dict:
+    settings = ENVS[env]
+    repeats, metric, mc_cap = settings["repeats"], settings["metric"], int(settings["mc_cap"] * args.scale)
+    setup = experiments.setup(env, settings["agent"], small_generator(env, settings["dataset"], settings["epochs"]), repeats=repeats)
+    means = metric_means(setup, metric)
+    start = time.perf_counter()
+    values = brute_force(means, setup.generator.latent_dim, int(settings["worlds"] * args.scale), args.seed)
+    seconds = time.perf_counter() - start
+    print(f"{env}: brute force {len(values)} worlds x {repeats} episodes in {seconds:.0f} s", flush=True)
+    events = []
+    for p in PROBABILITIES:
+        threshold = threshold_for(values, p, settings["op"])
+        selection = parse_selection(f"{metric} {settings['op']} {threshold!r}", env)
+        hits = int(np.sum(selection.clauses[0].holds(values)))
+        low, high = fr.clopper_pearson(hits, len(values))
+        reference = {"estimate": hits / len(values), "low": low, "high": high, "hits": hits}
+        row = {
+            "target_probability": p,
+            "threshold": threshold,
+            "brute_force": reference,
+            **run_event(means, setup, selection, reference, mc_cap, args),
+        }
+        events.append(row)
+        print(summary(env, row), flush=True)
+    return {
+        "agent": settings["agent"],
+        "metric": metric,
+        "repeats": repeats,
+        "mc_cap": mc_cap,
+        "brute_force_worlds": len(values),
+        "brute_force_episodes": len(values) * repeats,
+        "brute_force_seconds": round(seconds, 1),
+        "events": events,
+    }
+
+
+def summary(env: str, row: dict) -> str:
+    """One line per event: the brute-force P and each method's estimate, interval and episodes."""
+    parts = [f"{env} {row['event']}: brute force {row['brute_force']['estimate']:.3g}"]
+    for name in ("mc", "is", "mc_at_is_cost"):
+        est = row.get(name, {})
+        if "estimate" in est:
+            parts.append(f"{name} {est['estimate']:.3g} [{est['low']:.3g}, {est['high']:.3g}] {est['episodes']} episodes")
+        elif "error" in est:
+            parts.append(f"{name} failed: {est['error']}")
+    return "; ".join(parts)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scale", type=float, default=1.0, help="multiplies the brute-force worlds and Monte Carlo's cap of every env")
+    parser.add_argument("--width", type=float, default=0.5, help="relative half-width of the 95%% interval to reach")
+    parser.add_argument("--is-cap", type=int, default=50_000, help="importance sampling's worlds at most (after the search)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--envs", nargs="+", default=["racing", "harvest"])
+    args = parser.parse_args()
+    start = time.perf_counter()
+    results = {env: run_env(env, args) for env in args.envs}
+    payload = {
+        "benchmark": "failure_rate",
+        "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "machine": describe_machine(),
+        "settings": {
+            **vars(args),
+            "envs": {env: ENVS[env] for env in args.envs},
+            "importance": fr.ImportanceConfig().__dict__,
+            "batch": 1000,
+            "min_hits": fr.MIN_HITS,
+        },
+        "seconds": round(time.perf_counter() - start, 1),
+        **results,
+    }
+    import json
+
+    print("->", write_text(RESULTS / "failure-rate.json", json.dumps(payload, indent=2) + "\n"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,93 @@
+"""``worldagent failure-rate ENV --event "crash_rate > 0.5"``: how likely a failure is under the world distribution."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from worldagent.commands.console import console, friendly_errors
+from worldagent.commands.options import (
+    AGENT_HELP,
+    GENERATOR_HELP,
+    backend,
+    backend_flag,
+    check_counts,
+    env_argument,
+    env_options,
+    option_flag,
+    ray_address_flag,
+    stochastic_flag,
+)
+
+EVENT_HELP = (
+    "The event: METRIC OP NUMBER joined by 'and', on per-world means over the episodes, "
+    "e.g. 'crash_rate > 0.5' or 'return < 200' (the influence selection grammar)."
+)
+
+
+def estimate_line(estimate) -> str:
+    """One line: the estimate, its interval, the worlds and episodes spent (and for IS the search's share and the ESS)."""
+    name = {"mc": "Monte Carlo", "is": "importance sampling"}[estimate.method]
+    line = (
+        f"{name}: P = {estimate.estimate:.3g}, {estimate.confidence:.0%} interval [{estimate.low:.3g}, {estimate.high:.3g}]; "
+        f"{estimate.hits} hits in {estimate.worlds} worlds, {estimate.episodes} episodes"
+    )
+    if estimate.method == "is":
+        line += f" ({estimate.search_worlds} worlds searching); ESS {estimate.ess:.0f}, of the hits {estimate.event_ess:.0f}"
+    return line
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``worldagent failure-rate``."""
+
+    @app.command("failure-rate")
+    @friendly_errors
+    def failure_rate(
+        env: str = env_argument(),
+        agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
+        generator: Path = typer.Option(..., "--generator", help=GENERATOR_HELP),
+        event: str = typer.Option(..., "--event", help=EVENT_HELP),
+        method: str = typer.Option("both", "--method", help="mc (Monte Carlo, exact binomial interval), is (importance sampling) or both."),
+        worlds: int = typer.Option(10_000, "--worlds", help="Monte Carlo's worlds; importance sampling's worlds after its search."),
+        width: float = typer.Option(None, "--width", help="Stop sampling once the 95% interval is within ±WIDTH of the estimate (0.5: ±50%)."),
+        round_worlds: int = typer.Option(500, "--round-worlds", help="Importance sampling: worlds per round of the search for the proposal."),
+        rounds: int = typer.Option(10, "--rounds", help="Importance sampling: rounds of the search at most."),
+        repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the latents and episodes."),
+        out: Path = typer.Option(Path("runs/failure-rate"), "--out", help="Run directory (store.sqlite); a rerun resumes."),
+        option: list[str] = option_flag(),
+        greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
+        stochastic: bool = stochastic_flag(),
+        backend_name: str = backend_flag(),
+        ray_address: str = ray_address_flag(),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
+    ) -> None:
+        """The probability of an event (a failure) for worlds z ~ N(0, I), with a 95% interval and the episodes spent."""
+        from worldagent import experiments
+        from worldagent.analysis.failure_rate import ImportanceConfig, check_budget, methods
+        from worldagent.influence.selection import parse_selection
+        from worldagent.store import RunStore
+
+        check_counts(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds)
+        importance = ImportanceConfig(round_worlds=round_worlds, max_rounds=rounds)
+        methods(method)
+        check_budget(worlds, width, importance)
+        parse_selection(event, env)  # a bad event fails before the agent and generator load
+        setup = experiments.setup(
+            env,
+            agent,
+            generator,
+            options=env_options(env, option),
+            greedy=greedy,
+            stochastic=stochastic,
+            repeats=repeats,
+            backend=backend(backend_name, ray_address),
+        )
+        with RunStore(out) as store:
+            found = experiments.failure_rate(
+                store, setup, event, method=method, worlds=worlds, importance=importance, target_width=width, seed=seed, progress=not quiet
+            )
+        for estimate in found.values():
+            console.print(estimate_line(estimate), markup=False, highlight=False)
+        console.print(f"-> {out / 'store.sqlite'}", markup=False, highlight=False)

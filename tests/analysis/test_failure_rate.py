@@ -1,0 +1,195 @@
+"""Failure probability: exact binomial intervals, Monte Carlo and importance sampling on a closed-form
+Gaussian toy, resuming through the run store, one-line errors, and the CLI end to end."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from worldagent.analysis import failure_rate as fr
+from worldagent.cli import app
+from worldagent.errors import WorldagentError
+from worldagent.influence.selection import parse_selection
+from worldagent.store import RunStore
+
+THRESHOLD = 3.0
+P_TOY = 1 - NormalDist().cdf(THRESHOLD)  # P(z[0] > 3) for z ~ N(0, I): 1.35e-3
+Z95 = NormalDist().inv_cdf(0.975)
+
+
+def toy(z: np.ndarray, seeds: np.ndarray) -> fr.Scored:
+    """The event z[0] > 3, its margin z[0] - 3, one episode per world."""
+    return fr.Scored(z[:, 0] - THRESHOLD, z[:, 0] > THRESHOLD, len(z))
+
+
+def one_line(error: pytest.ExceptionInfo) -> str:
+    message = str(error.value)
+    assert "\n" not in message and message.endswith("."), message
+    return message
+
+
+# -- intervals -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [1, 10, 1000])
+def test_clopper_pearson_closed_forms_at_the_ends(n):
+    assert fr.clopper_pearson(0, n) == (0.0, pytest.approx(1 - 0.025 ** (1 / n), rel=1e-9))
+    assert fr.clopper_pearson(n, n) == (pytest.approx(0.025 ** (1 / n), rel=1e-9), 1.0)
+
+
+def test_clopper_pearson_textbook_values_and_symmetry():
+    assert fr.clopper_pearson(5, 10) == pytest.approx((0.187086, 0.812914), abs=1e-6)
+    assert fr.clopper_pearson(1, 100) == pytest.approx((0.000253, 0.054459), abs=1e-6)
+    low, high = fr.clopper_pearson(3, 40, confidence=0.9)
+    mirrored = fr.clopper_pearson(37, 40, confidence=0.9)
+    assert (low, high) == pytest.approx((1 - mirrored[1], 1 - mirrored[0]), abs=1e-12)
+    assert fr.clopper_pearson(3, 40, confidence=0.99)[1] > high  # more confidence, wider
+
+
+def test_weights_are_bounded_by_the_prior_share_and_ess_counts_equal_weights():
+    proposal = fr.Proposal(np.array([3.0, -1.0]))
+    z = fr.sample_mixture(np.random.default_rng(0), proposal, 0.2, 5000)
+    weights = fr.importance_weights(z, proposal, 0.2)
+    assert weights.max() <= 1 / 0.2 and weights.min() > 0
+    assert np.mean(weights) == pytest.approx(1.0, abs=0.05)  # E_q[p/q] = 1
+    assert fr.effective_sample_size(np.ones(7)) == pytest.approx(7.0)
+    assert fr.effective_sample_size(np.array([1.0, 0.0, 0.0])) == pytest.approx(1.0)
+
+
+# -- the event's margin ----------------------------------------------------------------------------
+
+
+def test_margin_is_the_smallest_clause_margin_and_positive_exactly_in_the_event():
+    selection = parse_selection("crash_rate > 0.5 and progress <= 0.3", "racing")
+    means = {"crashed": np.array([0.75, 1.0, 0.25, np.nan]), "progress": np.array([0.1, 0.5, 0.0, 0.1])}
+    scored = fr.score_means(selection, means, episodes=32)
+    assert scored.margin == pytest.approx([0.2, -0.2, -0.25, -np.inf])
+    assert scored.event.tolist() == [True, False, False, False] and scored.episodes == 32
+
+
+# -- the estimators on the Gaussian toy ------------------------------------------------------------
+
+
+def test_monte_carlo_covers_the_toy_and_stops_at_a_target_width():
+    estimate = fr.monte_carlo(lambda z, s: fr.Scored(z[:, 0] - 2, z[:, 0] > 2, 2 * len(z)), 10, 20_000, seed=1)
+    p = 1 - NormalDist().cdf(2)
+    assert estimate.low <= p <= estimate.high and estimate.worlds == 20_000 and estimate.episodes == 40_000
+    assert (estimate.low, estimate.high) == fr.clopper_pearson(estimate.hits, 20_000)
+    early = fr.monte_carlo(lambda z, s: fr.Scored(z[:, 0] - 2, z[:, 0] > 2, len(z)), 10, 20_000, seed=1, batch=500, target_width=0.3)
+    assert early.worlds < 20_000 and early.relative_half_width <= 0.3 and early.hits >= fr.MIN_HITS
+
+
+def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_than_monte_carlo():
+    estimate = fr.importance_sampling(toy, 10, 2000, seed=0)
+    assert estimate.low <= P_TOY <= estimate.high
+    assert estimate.worlds == estimate.search_worlds + 2000 and estimate.episodes == estimate.worlds
+    width = estimate.relative_half_width
+    assert width < 0.25
+    monte_carlo_worlds = Z95**2 * (1 - P_TOY) / (P_TOY * width**2)  # binomial: half-width z·sqrt(P(1-P)/n) = width·P
+    assert 10 * estimate.worlds <= monte_carlo_worlds
+    assert 0 < estimate.event_ess <= estimate.hits and 0 < estimate.ess <= 2000
+    assert fr.importance_sampling(toy, 10, 2000, seed=0) == estimate  # deterministic given the seed
+
+
+def test_importance_sampling_learns_the_prior_mean_on_the_event():
+    spend = fr._Spender(toy, 0)
+    proposal, best = fr.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig())
+    conditional_mean = NormalDist().pdf(THRESHOLD) / P_TOY  # E[z0 | z0 > 3] = 3.28
+    assert proposal.mean[0] == pytest.approx(conditional_mean, abs=0.3) and np.all(np.abs(proposal.mean[1:]) < 0.4)
+    assert best > 0 and spend.worlds <= 10 * 500
+
+
+# -- resuming through the store --------------------------------------------------------------------
+
+
+@dataclass
+class ToyOutcome:
+    episodes: list
+    world: None = None
+
+
+def test_a_rerun_replays_the_store_and_evaluates_nothing(tmp_path):
+    calls = []
+
+    def outcomes(z, seeds):
+        calls.append(len(z))
+        return [ToyOutcome([{"return": float(value)}]) for value in z[:, 0]]
+
+    selection = parse_selection("return > 2", "racing")
+    with RunStore(tmp_path) as store:
+
+        def estimate(batch):
+            campaign = store.open_campaign(fr.campaign_name("mc", selection.text, 0), "racing", "margin", True, "mc", 600, 0, {}, True)
+            evaluate = fr.StoredEvaluate(store, campaign, outcomes, lambda ws: fr.score_worlds(selection, ws))
+            return fr.monte_carlo(evaluate, 3, 600, seed=0, batch=batch)
+
+        first = estimate(200)
+        assert sum(calls) == 600 and len(store.evaluations("failure-mc-return>2-s0")) == 600
+        assert estimate(200) == first and sum(calls) == 600
+        with pytest.raises(WorldagentError) as error:
+            estimate(150)
+    assert "other worlds at generation" in one_line(error)
+
+
+# -- bad input -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: fr.monte_carlo(toy, 10, 0), "worlds=0"),
+        (lambda: fr.monte_carlo(toy, 10, 100, batch=-5), "batch=-5"),
+        (lambda: fr.monte_carlo(toy, 10, 100, target_width=0), "positive relative half-width"),
+        (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(round_worlds=10)), "fewer than 2 elites"),
+        (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(prior_weight=1.5)), "prior_weight=1.5"),
+        (lambda: fr.clopper_pearson(5, 3), "0 <= k <= n"),
+        (lambda: fr.methods("bootstrap"), "use mc, is or both"),
+        (lambda: parse_selection("speed > 3", "racing"), "unknown racing metric 'speed'"),
+    ],
+)
+def test_bad_input_is_refused_with_one_line(call, message):
+    with pytest.raises(WorldagentError) as error:
+        call()
+    assert message in one_line(error)
+
+
+def test_an_event_that_never_occurs_is_refused_by_importance_sampling():
+    never = lambda z, s: fr.Scored(-np.abs(z[:, 0]) - 1, np.zeros(len(z), bool), len(z))  # |z0| < -1: impossible
+    with pytest.raises(WorldagentError) as error:
+        fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(round_worlds=100, max_rounds=3))
+    assert "never occurred in the 500 worlds sampled" in one_line(error) and "check the thresholds" in str(error.value)
+    nothing = fr.monte_carlo(never, 10, 500)  # Monte Carlo's answer is an upper bound
+    assert (nothing.estimate, nothing.low, nothing.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 500)))
+
+
+# -- the command -----------------------------------------------------------------------------------
+
+
+def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, racing_generator):
+    from worldagent.worlds.generator import save_generator
+
+    runner = CliRunner()
+    gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
+    common = ["racing", "--agent", "driver", "--generator", str(gen), "--out", str(tmp_path / "run"), "--repeats", "1", "--quiet"]
+    args = [*common, "--event", "return < 60", "--worlds", "30", "--round-worlds", "20", "--rounds", "2"]
+    result = runner.invoke(app, ["failure-rate", *args])
+    assert result.exit_code == 0, result.output
+    assert "Monte Carlo: P = " in result.output and "importance sampling: P = " in result.output and "ESS" in result.output
+    with RunStore(tmp_path / "run", create=False) as store:
+        names = [c.name for c in store.campaigns()]
+        assert names == ["failure-mc-return<60-s0", "failure-is-return<60-s0"]
+        assert len(store.evaluations(names[0])) == 30 and 30 < len(store.evaluations(names[1])) <= 70
+    assert runner.invoke(app, ["failure-rate", *args]).output == result.output  # resumed: the same lines
+    for extra, message in [
+        (["--event", "speed > 3"], "unknown racing metric 'speed'"),
+        (["--event", "return < 60", "--worlds", "0"], "--worlds is 0"),
+        (["--event", "return < 60", "--round-worlds", "5"], "fewer than 2 elites"),
+        (["--event", "return < 60", "--method", "bootstrap"], "use mc, is or both"),
+    ]:
+        bad = runner.invoke(app, ["failure-rate", *common, *extra])
+        lines = bad.output.strip().splitlines()
+        assert bad.exit_code == 2 and len(lines) == 1 and message in lines[0], bad.output

@@ -12,7 +12,7 @@ from worldagent import experiments
 from worldagent.cli import app
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.search.atlas import Grid, archive_of, cell_of, check_descriptors, distinct_count
+from worldagent.search.atlas import Grid, archive_of, atlas_names, cell_of, check_descriptors, distinct_count, read_atlas
 from worldagent.store import RunStore
 
 GRID = Grid(("a", "b"), (2, 3), ((0.0, 1.0), (0.0, 3.0)))
@@ -90,6 +90,14 @@ def test_a_killed_atlas_resumes_to_the_same_archive(tmp_path, racing_generator):
     assert resumed["coverage"] > 0.25 and resumed["distinct_failing"] == whole["distinct_failing"]
     with RunStore(tmp_path / "whole") as store:
         assert store.campaign("atlas-min-return-s1").config["atlas"]["grid"]["descriptors"] == ["total_curvature", "sharpest_corner"]
+        # read back with no agent and no generator: the archive the search built
+        assert atlas_names(store) == ["atlas-min-return-s1"]
+        stored = read_atlas(store, "atlas-min-return-s1")
+        np.testing.assert_array_equal(stored.archive.cells, whole["archive"].cells)
+        np.testing.assert_allclose(stored.archive.measures, whole["archive"].measures)
+        assert stored.grid == whole["grid"] and len(stored.cell_table()) == len(whole["archive"].cells)
+        with pytest.raises(WorldagentError, match="not an atlas campaign"):
+            read_atlas(store, "random-return-s0")
 
 
 def test_the_atlas_command_draws_the_archive(tmp_path, racing_vae, racing_data, racing_generator):

@@ -231,3 +231,72 @@ def world_key(arrays: dict[str, np.ndarray]) -> str:
 def distinct_count(worlds: Sequence[dict[str, np.ndarray]]) -> int:
     """How many different worlds (after repair) ``worlds`` holds."""
     return len({world_key(w) for w in worlds})
+
+
+@dataclass(frozen=True)
+class StoredAtlas:
+    """An atlas read back from a run store (``read_atlas``).
+
+    Attributes:
+        campaign: the store's ``Campaign``.
+        grid: the archive's layout, as the campaign recorded it.
+        evaluations: every evaluated world, in order, with its stored world.
+        measures: f64[n, k] each evaluated world's descriptors.
+        archive: the best world of each filled cell (indices into ``evaluations``).
+    """
+
+    campaign: Any
+    grid: Grid
+    evaluations: list
+    measures: np.ndarray
+    archive: Archive
+
+    @property
+    def maximize(self) -> bool:
+        return bool(self.campaign.maximize)
+
+    def cell_table(self) -> list[dict]:
+        """One row per filled cell: its flat index, the descriptors and score of its best world, and where that world is stored."""
+        return [
+            {
+                "cell": int(cell),
+                **dict(zip(self.grid.descriptors, map(float, self.archive.measures[i]))),
+                "score": float(self.archive.scores[i]),
+                "generation": self.evaluations[int(self.archive.best[i])].generation,
+                "slot": self.evaluations[int(self.archive.best[i])].slot,
+            }
+            for i, cell in enumerate(self.archive.cells)
+        ]
+
+
+def atlas_names(store: Any) -> list[str]:
+    """The store's atlas campaigns (those that recorded a grid), in the order they were made."""
+    return [c.name for c in store.campaigns() if "atlas" in c.config]
+
+
+def read_atlas(store: Any, name: str) -> StoredAtlas:
+    """Load atlas campaign ``name`` from a ``RunStore``: its grid, worlds, descriptors and archive.
+
+    Needs no agent and no generator: descriptors are computed from the stored worlds (those G(z)
+    made), so the archive equals the one the search built.
+
+    Example::
+
+        with RunStore("runs/atlas") as store:
+            atlas = read_atlas(store, atlas_names(store)[0])
+            print(atlas.archive.coverage(atlas.grid), atlas.cell_table()[:3])
+    """
+    from worldagent.envs import registry
+
+    campaign = store.campaign(name)
+    if campaign is None or "atlas" not in campaign.config:
+        known = ", ".join(atlas_names(store)) or "none"
+        raise WorldagentError(f"{name!r} is not an atlas campaign of {store.path}; atlases there: {known}.")
+    recorded = campaign.config["atlas"]["grid"]
+    grid = Grid(tuple(recorded["descriptors"]), tuple(recorded["cells"]), tuple(tuple(r) for r in recorded["ranges"]))
+    spec = registry.get(campaign.env)
+    evaluations = store.evaluations(name, with_worlds=True)
+    functions = [spec.metrics.descriptors[d] for d in grid.descriptors]
+    measures = np.array([[f(spec.world_from_arrays(e.world)) for f in functions] for e in evaluations], np.float64).reshape(-1, len(functions))
+    scores = np.array([e.score for e in evaluations], np.float64)
+    return StoredAtlas(campaign, grid, evaluations, measures, archive_of(grid, scores, measures, bool(campaign.maximize)))

@@ -638,6 +638,7 @@ def failure_rate(
     for name in methods:
         total = worlds + (importance.max_rounds * importance.round_worlds if name == "is" else 0)
         config = {"event": selection.text, "repeats": setup.repeats, "batch": fr.BATCH, "agent": agent_record(setup.policy)}
+        config |= {"worlds": int(worlds), "target_width": target_width}  # what ``analysis.stored.read_estimate`` replays
         config |= asdict(importance) if name == "is" else {}
         campaign = store.open_campaign(fr.campaign_name(name, selection.text, seed), setup.spec.name, "margin", True, name, total, seed, config, True)
         with progress_bar(f"{name}: P({selection.describe()})", total=total, enabled=progress) as advance:

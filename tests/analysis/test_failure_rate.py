@@ -11,7 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from worldagent.analysis import failure_rate as fr
+from worldagent.analysis.stored import failure_names, read_estimate
 from worldagent.cli import app
+from worldagent.commands.failure_rate import estimate_line
 from worldagent.errors import WorldagentError
 from worldagent.influence.selection import parse_selection
 from worldagent.store import RunStore
@@ -184,6 +186,11 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
         assert names == ["failure-mc-return<60-s0", "failure-is-return<60-s0"]
         assert len(store.evaluations(names[0])) == 30 and 30 < len(store.evaluations(names[1])) <= 70
     assert runner.invoke(app, ["failure-rate", *args]).output == result.output  # resumed: the same lines
+    with RunStore(tmp_path / "run", create=False) as store:  # read back with no agent or generator: the same estimates
+        assert failure_names(store) == names
+        assert [estimate_line(read_estimate(store, name)) for name in names] == result.output.strip().splitlines()[:2]
+        with pytest.raises(WorldagentError, match="not a failure-rate campaign"):
+            read_estimate(store, "random-return-s0")
     for extra, message in [
         (["--event", "speed > 3"], "unknown racing metric 'speed'"),
         (["--event", "return < 60", "--worlds", "0"], "--worlds is 0"),

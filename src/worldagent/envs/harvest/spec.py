@@ -220,7 +220,7 @@ SPEC = register(
                 influence_eval_worlds=50,
                 influence_seeds=(0,),
                 atlas_budget=105,
-                failure_worlds=200,
+                failure_worlds=100,
                 influence_search_budget=210,
                 learning_starts=4_000,
             ),

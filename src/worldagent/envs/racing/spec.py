@@ -176,7 +176,7 @@ SPEC = register(
                 influence_eval_worlds=200,
                 influence_seeds=(0,),
                 atlas_budget=420,
-                failure_worlds=2_000,
+                failure_worlds=1_000,
                 influence_selection="crash_rate > 0",
             ),
             "tiny": _budgets(

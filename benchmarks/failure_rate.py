@@ -59,8 +59,8 @@ ENVS = {
         "metric": "sustainability",
         "op": "<",
         "repeats": 1,
-        "worlds": 40_000,
-        "mc_cap": 10_000,
+        "worlds": 100_000,
+        "mc_cap": 20_000,
         "dataset": 512,
         "epochs": 30,
     },
@@ -97,14 +97,37 @@ def metric_means(setup, metric: str):
     return means
 
 
-def brute_force(means, dim: int, worlds: int, seed: int) -> np.ndarray:
-    """f64[worlds]: the metric's per-world means on ``worlds`` worlds z ~ N(0, I) (their own stream and seeds)."""
+def generator_hash(generator) -> str:
+    """A short hash of the generator's weights: a cached brute force is reused only for the same G."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for leaf in jax.tree_util.tree_leaves(generator.params):
+        digest.update(np.asarray(leaf).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def brute_force(means, dim: int, worlds: int, seed: int, cache: Path | None = None, key: str = "") -> tuple[np.ndarray, float]:
+    """(f64[worlds], seconds): the metric's per-world means on ``worlds`` worlds z ~ N(0, I) (their own stream and seeds).
+
+    With ``cache``, the values and the seconds they took are kept in ``cache/{key}-{worlds}-s{seed}.npz``
+    and read back on a rerun.
+    """
+    path = None if cache is None else Path(cache) / f"{key}-{worlds}-s{seed}.npz"
+    if path is not None and path.exists():
+        kept = np.load(path, allow_pickle=False)
+        return kept["values"], float(kept["seconds"])
+    start = time.perf_counter()
     rng = np.random.default_rng([seed, 99])
     chunks = []
     for start in range(0, worlds, CHUNK):
         n = min(CHUNK, worlds - start)
         chunks.append(means(rng.standard_normal((n, dim)), rng.integers(0, 2**31, n)))
-    return np.concatenate(chunks)
+    values, seconds = np.concatenate(chunks), time.perf_counter() - start
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, values=values, seconds=seconds)
+    return values, seconds
 
 
 def mc_worlds_for_width(p: float, width: float) -> int | None:
@@ -167,10 +190,11 @@ def run_env(env: str, args) -> dict:
     repeats, metric, mc_cap = settings["repeats"], settings["metric"], int(settings["mc_cap"] * args.scale)
     setup = experiments.setup(env, settings["agent"], small_generator(env, settings["dataset"], settings["epochs"]), repeats=repeats)
     means = metric_means(setup, metric)
-    start = time.perf_counter()
-    values = brute_force(means, setup.generator.latent_dim, int(settings["worlds"] * args.scale), args.seed)
-    seconds = time.perf_counter() - start
-    print(f"{env}: brute force {len(values)} worlds x {repeats} episodes in {seconds:.0f} s", flush=True)
+    key = f"{env}-{generator_hash(setup.generator)}"
+    values, seconds = brute_force(means, setup.generator.latent_dim, int(settings["worlds"] * args.scale), args.seed, args.cache, key)
+    print(f"{env}: brute force {len(values)} worlds x {repeats} episodes in {seconds:.0f} s ({key})", flush=True)
+    if args.brute_force_only:
+        return {"brute_force_worlds": len(values), "brute_force_seconds": round(seconds, 1)}
     events = []
     for p in PROBABILITIES:
         threshold = threshold_for(values, p, settings["op"])
@@ -217,9 +241,13 @@ def main() -> None:
     parser.add_argument("--is-cap", type=int, default=50_000, help="importance sampling's worlds at most (after the search)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--envs", nargs="+", default=["racing", "harvest"])
+    parser.add_argument("--cache", type=Path, default=None, help="keep the brute-force values here and reuse them (same G, worlds, seed)")
+    parser.add_argument("--brute-force-only", action="store_true", help="only the brute force (to fill --cache); writes no result")
     args = parser.parse_args()
     start = time.perf_counter()
     results = {env: run_env(env, args) for env in args.envs}
+    if args.brute_force_only:
+        return
     payload = {
         "benchmark": "failure_rate",
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

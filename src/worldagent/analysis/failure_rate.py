@@ -40,6 +40,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
+from scipy.special import logsumexp
 
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
@@ -114,32 +115,59 @@ class ImportanceConfig:
     Attributes:
         round_worlds: worlds per cross-entropy round.
         max_rounds: rounds at most (the search stops once the elites are all in the event).
-        elite_fraction: the top fraction of a round the proposal's mean is fitted to.
+        elite_fraction: the top fraction of a round the proposal is fitted to.
         prior_weight: α, the prior's share of the mixture (weights ≤ 1/α).
-        smoothing: the new mean's weight against the previous one (1: no smoothing).
+        components: shifted priors in the proposal at most (1: a single mean shift); the number
+            is chosen per round by BIC on the weighted elites.
+        scale: the components' standard deviation (1: the prior's; at most 1).
     """
 
     round_worlds: int = 500
     max_rounds: int = 10
     elite_fraction: float = 0.1
     prior_weight: float = 0.1
-    smoothing: float = 0.8
+    components: int = 4
+    scale: float = 1.0
 
     def validate(self) -> None:
         _check_count("round_worlds", self.round_worlds)
         _check_count("max_rounds", self.max_rounds)
-        for name in ("elite_fraction", "prior_weight", "smoothing"):
-            if not 0 < getattr(self, name) < 1 and not (name == "smoothing" and self.smoothing == 1):
+        _check_count("components", self.components)
+        for name in ("elite_fraction", "prior_weight"):
+            if not 0 < getattr(self, name) < 1:
                 raise WorldagentError(f"{name}={getattr(self, name)}; pass a fraction between 0 and 1.")
+        if not 0 < self.scale <= 1:
+            raise WorldagentError(f"scale={self.scale}; pass a standard deviation in (0, 1] (1: the prior's).")
         if self.round_worlds * self.elite_fraction < 2:
             raise WorldagentError(f"{self.round_worlds} worlds per round keep fewer than 2 elites; raise round_worlds or elite_fraction.")
 
 
 @dataclass(frozen=True)
 class Proposal:
-    """g = N(mean, I) over latents: mean f64[dim]."""
+    """g = Σ_k share_k N(centre_k, scale² I) over latents.
 
-    mean: np.ndarray
+    Attributes:
+        centres: f64[k, dim].
+        shares: f64[k], summing to 1.
+        scale: the components' standard deviation.
+    """
+
+    centres: np.ndarray
+    shares: np.ndarray
+    scale: float = 1.0
+
+    @classmethod
+    def shift(cls, mean: np.ndarray) -> Proposal:
+        """The prior shifted to ``mean`` f64[dim]: one component of scale 1."""
+        return cls(np.asarray(mean, np.float64)[None, :], np.ones(1))
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, Proposal)
+            and self.scale == other.scale
+            and np.array_equal(self.centres, other.centres)
+            and np.array_equal(self.shares, other.shares)
+        )
 
 
 # -- intervals -------------------------------------------------------------------------------------
@@ -302,7 +330,7 @@ def importance_sampling(
 
 def learn_proposal(spend: Callable[[np.ndarray], Scored], rng: np.random.Generator, dim: int, config: ImportanceConfig) -> tuple[Proposal, float]:
     """The cross-entropy method: (the proposal, the best margin seen); ``spend(z) -> Scored`` evaluates."""
-    proposal, best = Proposal(np.zeros(dim)), -np.inf
+    proposal, best = Proposal.shift(np.zeros(dim)), -np.inf
     for _ in range(config.max_rounds):
         z = sample_mixture(rng, proposal, config.prior_weight, config.round_worlds)
         scored = spend(z)
@@ -312,8 +340,8 @@ def learn_proposal(spend: Callable[[np.ndarray], Scored], rng: np.random.Generat
         best = max(best, float(finite.max()))
         level = min(0.0, float(np.quantile(finite, 1 - config.elite_fraction)))  # never past the event itself
         elite = elites(scored, level)
-        proposal = refit(z[elite], importance_weights(z, proposal, config.prior_weight)[elite], proposal, config)
-        if level >= 0 and scored.event.sum() >= 2:  # fitted to the event's worlds: to the prior's mean on it
+        proposal = fit_mixture(z[elite], importance_weights(z, proposal, config.prior_weight)[elite], config, rng)
+        if level >= 0 and scored.event.sum() >= 2:  # fitted to the event's worlds: to the prior on it
             break
     return proposal, best
 
@@ -325,23 +353,60 @@ def elites(scored: Scored, level: float) -> np.ndarray:
     return next((choice for choice in choices if choice.sum() >= 2), scored.margin >= level)
 
 
-def refit(z: np.ndarray, weights: np.ndarray, previous: Proposal, config: ImportanceConfig) -> Proposal:
-    """The proposal at the weighted mean of elites z f64[m, dim] (weights f64[m]), smoothed toward ``previous``."""
-    mean = (weights / weights.sum() if weights.sum() > 0 else np.full(len(z), 1 / len(z))) @ z
-    return Proposal(config.smoothing * mean + (1 - config.smoothing) * previous.mean)
+def fit_mixture(z: np.ndarray, weights: np.ndarray, config: ImportanceConfig, rng: np.random.Generator) -> Proposal:
+    """The cross-entropy update in the family of mixtures of shifted priors: weighted EM on elites z f64[m, dim]
+    (weights f64[m] = p/q), for 1 to ``config.components`` components, keeping the fit with the lowest BIC."""
+    weights = weights / weights.sum() if weights.sum() > 0 else np.full(len(z), 1 / len(z))
+    count = effective_sample_size(weights)  # the elites' worth in equally weighted points: BIC's sample size
+    best, best_bic = None, np.inf
+    for k in range(1, min(config.components, len(z)) + 1):
+        proposal = weighted_em(z, weights, k, config.scale, rng)
+        bic = -2 * count * float(weights @ log_mixture(z, proposal)) + (k * (z.shape[1] + 1) - 1) * np.log(max(count, 2.0))
+        if bic < best_bic:
+            best, best_bic = proposal, bic
+    return best
+
+
+def weighted_em(z: np.ndarray, weights: np.ndarray, k: int, scale: float, rng: np.random.Generator, steps: int = 30) -> Proposal:
+    """k components of standard deviation ``scale`` fitted by EM to points z f64[m, dim] with weights f64[m] (sum 1),
+    started from weighted k-means++ centres."""
+    centres = z[[rng.choice(len(z), p=weights)]]
+    while len(centres) < k:  # k-means++: the next centre far from the chosen ones
+        far = weights * np.min(((z[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
+        centres = np.vstack([centres, z[rng.choice(len(z), p=far / far.sum()) if far.sum() > 0 else rng.choice(len(z))]])
+    proposal = Proposal(centres, np.full(k, 1 / k), scale)
+    for _ in range(steps):
+        log_parts = component_logs(z, proposal)
+        resp = np.exp(log_parts - logsumexp(log_parts, axis=1, keepdims=True)) * weights[:, None]
+        mass = resp.sum(axis=0)
+        keep = mass > 1e-12  # an emptied component is dropped
+        proposal = Proposal((resp[:, keep].T @ z) / mass[keep, None], mass[keep] / mass[keep].sum(), scale)
+    return proposal
+
+
+def component_logs(z: np.ndarray, proposal: Proposal) -> np.ndarray:
+    """f64[n, k]: log share_k + log N(z; centre_k, scale² I) − log N(z; 0, I) for latents z f64[n, dim]."""
+    s2 = proposal.scale**2
+    squares = ((z[:, None, :] - proposal.centres[None]) ** 2).sum(-1)
+    return np.log(proposal.shares)[None] - z.shape[1] * np.log(proposal.scale) - squares / (2 * s2) + 0.5 * (z**2).sum(-1)[:, None]
+
+
+def log_mixture(z: np.ndarray, proposal: Proposal) -> np.ndarray:
+    """f64[n]: log g(z) − log p(z), the proposal's log density over the prior's at latents z f64[n, dim]."""
+    return logsumexp(component_logs(z, proposal), axis=1)
 
 
 def sample_mixture(rng: np.random.Generator, proposal: Proposal, prior_weight: float, n: int) -> np.ndarray:
     """f64[n, dim] latents from q = α N(0, I) + (1 − α) g."""
     from_prior = rng.random(n) < prior_weight
-    noise = rng.standard_normal((n, len(proposal.mean)))
-    return np.where(from_prior[:, None], noise, proposal.mean + noise)
+    component = rng.choice(len(proposal.shares), size=n, p=proposal.shares)
+    noise = rng.standard_normal((n, proposal.centres.shape[1]))
+    return np.where(from_prior[:, None], noise, proposal.centres[component] + proposal.scale * noise)
 
 
 def importance_weights(z: np.ndarray, proposal: Proposal, prior_weight: float) -> np.ndarray:
     """f64[n]: p(z) / q(z) for the prior p = N(0, I) and q = α p + (1 − α) g; each at most 1/α."""
-    log_ratio = z @ proposal.mean - 0.5 * proposal.mean @ proposal.mean  # log g/p of the shifted prior
-    return 1.0 / (prior_weight + (1 - prior_weight) * np.exp(np.minimum(log_ratio, 700.0)))
+    return 1.0 / (prior_weight + (1 - prior_weight) * np.exp(np.minimum(log_mixture(z, proposal), 700.0)))
 
 
 # -- evaluation through the run store --------------------------------------------------------------

@@ -444,11 +444,10 @@ def atlas_summary(store: RunStore, grid: Any, describe: Any, campaigns: Sequence
         {campaign: {"evaluations", "archive" (``search.atlas.Archive``), "coverage", "qd_score",
         "failing", "distinct_failing" (None without ``failure``), "qd_offset", "grid", "describe"}}.
     """
-    from worldagent.search.atlas import archive_of, distinct_count
+    from worldagent.search.atlas import archive_of, distinct_count, qd_offset
 
     runs = {name: store.evaluations(name) for name in campaigns}
-    finite = [e.score for found in runs.values() for e in found if np.isfinite(e.score)]
-    offset = (min(finite) if maximize else max(finite)) if finite else 0.0
+    offset = qd_offset(np.array([e.score for found in runs.values() for e in found]), maximize)
     summary = {}
     for name, found in runs.items():
         scores = np.array([e.score for e in found], np.float64)

@@ -110,10 +110,14 @@ def test_restart_forgets_a_phase_and_what_depends_on_it(racing_copy):
     manifest = Manifest.open(racing_copy)
     forget_phases(manifest, EnvContext(racing_copy, "racing", TINY), ["strategic", "compare"])
     left = rows(racing_copy / "racing" / "store.sqlite")
-    assert set(left) == {"random-return-s0"}
+    atlas = {"atlas-min-return-s0", "failure-mc-crash_rate>0.5-s0", "failure-is-crash_rate>0.5-s0"}
+    assert set(left) == {"random-return-s0"} | atlas
     assert not (racing_copy / "racing" / "figures" / "strategic.png").exists()
     assert Manifest.open(racing_copy).phase("racing/strategic") is None
     assert Manifest.open(racing_copy).phase("racing/random")["status"] == "done"
+    forget_phases(manifest, EnvContext(racing_copy, "racing", TINY), ["atlas"])  # the atlas and its estimates go together
+    assert set(rows(racing_copy / "racing" / "store.sqlite")) == {"random-return-s0"}
+    assert not (racing_copy / "racing" / "figures" / "atlas.png").exists()
 
 
 def test_an_influence_that_finds_no_world_is_a_result_not_a_crash(racing_copy, monkeypatch):

@@ -80,7 +80,8 @@ def test_bad_names_and_budgets_are_refused_in_one_line():
 def test_restarting_a_phase_restarts_what_is_computed_from_it():
     assert dependents("influence") == ["influence"]
     assert dependents("random") == ["random", "strategic", "compare"]
-    assert dependents("agent") == ["agent", "random", "strategic", "compare", "influence"]
+    assert dependents("agent") == ["agent", "random", "strategic", "compare", "influence", "atlas"]
+    assert dependents("atlas") == ["atlas"]
     assert restart_closure(["dataset"]) == list(PHASES)
     assert restart_closure(["compare", "strategic"]) == ["strategic", "compare"]
     with pytest.raises(WorldagentError, match="unknown phase 'train'"):

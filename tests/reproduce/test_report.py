@@ -168,3 +168,33 @@ def test_harvest_reward_is_normalised_by_the_runs_best_episode():
     assert rows["harvest.influence.conflict_default"].paper == 0.51
     assert np.isclose(rows["harvest.influence.reward_change_pct"].ours, -10.0)
     assert not any(key.startswith("racing.") for key in rows)  # racing not run: no rows
+
+
+def test_the_failure_atlas_section_is_recomputed_from_the_store(racing_run):
+    """Coverage, failing worlds and the Monte Carlo estimate, recomputed here from the raw rows."""
+    out, _ = racing_run
+    page = (out / "report.html").read_text()
+    shown = data_values(page)
+    spec = registry.get("racing")
+    with RunStore(out / "racing" / "store.sqlite", create=False) as store:
+        atlas = store.evaluations("atlas-min-return-s0", with_worlds=True)
+        grid = store.campaign("atlas-min-return-s0").config["atlas"]["grid"]
+        mc = store.evaluations("failure-mc-crash_rate>0.5-s0")
+        assert store.campaign("failure-is-crash_rate>0.5-s0") is not None
+    cells = set()
+    for evaluation in atlas:
+        world = spec.world_from_arrays(evaluation.world)
+        index = []
+        for name, count, (low, high) in zip(grid["descriptors"], grid["cells"], grid["ranges"]):
+            index.append(min(count - 1, max(0, int(np.floor((spec.metrics.descriptors[name](world) - low) / (high - low) * count)))))
+        cells.add(tuple(index))
+    failing = [e for e in atlas if episode_mean(e, "crashed") > 0.5]
+    assert shown["racing.atlas.evaluations"] == len(atlas) == 105
+    assert shown["racing.atlas.coverage"] == pytest.approx(len(cells) / np.prod(grid["cells"]))
+    assert shown["racing.atlas.failing"] == len(failing)
+    assert shown["racing.atlas.distinct_failing"] == len({e.world["road"].tobytes() for e in failing})
+    hits = sum(episode_mean(e, "crashed") > 0.5 for e in mc)
+    assert shown["racing.failure.mc.estimate"] == pytest.approx(hits / len(mc)) and shown["racing.failure.mc.worlds"] == len(mc) == 64
+    assert shown["racing.failure.mc.low"] <= shown["racing.failure.mc.estimate"] <= shown["racing.failure.mc.high"]
+    assert shown["racing.failure.is.episodes"] == 2 * shown["racing.failure.is.worlds"] > 0
+    assert "Failure groups" in page and "How likely is" in page

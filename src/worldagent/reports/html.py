@@ -32,6 +32,7 @@ SECTIONS = (
     ("strategic", "Strategic evaluation (Figures 1, 6b)"),
     ("comparison", "Optimiser comparison (Figure 7)"),
     ("influence", "Influencing (Figure 8)"),
+    ("atlas", "Failure atlas (beyond the paper)"),
     ("headline", "Headline numbers"),
 )
 
@@ -245,6 +246,77 @@ def influence_section(run_dir: Path, results: dict) -> str:
     return per_env(results, "influence", render, "influence", "no influence.json")
 
 
+def atlas_section(run_dir: Path, results: dict) -> str:
+    def render(env: str, res: dict) -> str:
+        outputs = res["phases"]["atlas"].get("outputs", {})
+        if "skipped" in outputs:
+            return missing(f"skipped: {outputs['skipped']}")
+        found = res["atlas"]
+        grid, key = found["atlas"].grid, f"{env}.atlas"
+        rows = [
+            ["<td>worlds evaluated (CMA-ME)</td>" + number(f"{key}.evaluations", found["evaluations"])],
+            [f"<td>cells filled of {grid.size} ({' x '.join(map(str, grid.cells))}: {esc(', '.join(grid.descriptors))})</td>"]
+            + [number(f"{key}.coverage", found["coverage"], 3, " coverage")],
+            ["<td>QD-score (offset: the worst world evaluated)</td>" + number(f"{key}.qd_score", found["qd_score"])],
+        ]
+        body = ""
+        if "selection" in found:
+            event = esc(found["selection"].describe())
+            rows += [
+                [f"<td>failing worlds ({event})</td>" + number(f"{key}.failing", found["failing"])],
+                ["<td>distinct failing worlds (different after repair)</td>" + number(f"{key}.distinct_failing", found["distinct_failing"])],
+            ]
+            body = probability_table(env, found, res["phases"]["atlas"]["config"]) + cluster_table(found) + pair_list(run_dir, outputs)
+        return (
+            table(["", "value"], rows, raw_cells=True)
+            + image(run_dir / outputs["figure"], f"{env}: the worst world of each cell of the descriptor grid, and worlds of distinct cells")
+            + body
+        )
+
+    return per_env(results, "atlas", render, "atlas", "no atlas campaign in the store")
+
+
+def probability_table(env: str, found: dict, config: dict) -> str:
+    """P(failure) for worlds z ~ N(0, I): each estimator's estimate, 95% interval and cost, replayed from the store."""
+    names = {"mc": "Monte Carlo (exact binomial interval)", "is": "importance sampling (cross-entropy proposal mixed with the prior)"}
+    rows = []
+    for method, estimate in found["estimates"].items():
+        if isinstance(estimate, str):
+            rows.append([f"<td>{names[method]}</td>", f"<td colspan='6' class='error'>{esc(estimate)}</td>"])
+            continue
+        key = f"{env}.failure.{method}"
+        ess = "" if estimate.ess is None else f"{estimate.ess:.0f} ({estimate.event_ess:.0f} of the hits)"
+        rows.append(
+            [f"<td>{names[method]}</td>"]
+            + [number(f"{key}.{field}", getattr(estimate, field), 3) for field in ("estimate", "low", "high")]
+            + [number(f"{key}.{field}", getattr(estimate, field)) for field in ("hits", "worlds", "episodes")]
+            + [f"<td class='num'>{ess}</td>"]
+        )
+    if not rows:
+        return missing("no failure-rate estimate (the preset's failure_worlds is 0)")
+    return f"<h4>How likely is <code>{esc(found['selection'].describe())}</code> on worlds z ~ N(0, I)?</h4>" + table(
+        ["method", "P", "95% low", "95% high", "hits", "worlds", f"episodes ({config.get('repeats', '?')} per world)", "ESS"], rows, raw_cells=True
+    )
+
+
+def cluster_table(found: dict) -> str:
+    """The failing worlds' groups: size and mean descriptors."""
+    names = found["atlas"].grid.descriptors
+    rows = [[str(i + 1), str(len(c.members)), *[fmt(v, 3) for v in c.centre]] for i, c in enumerate(found["clusters"])]
+    return "<h4>Failure groups (k-means on descriptors and latents)</h4>" + (
+        table(["group", "worlds", *[f"mean {n.replace('_', ' ')}" for n in names]], rows) if rows else missing("no failing world")
+    )
+
+
+def pair_list(run_dir: Path, outputs: dict) -> str:
+    """The counterfactual figure: each failing world beside the nearest passing one on its latent segment."""
+    if "counterfactuals" not in outputs:
+        return ""
+    spots = ", ".join(f"{p['t_failing']:.3f}–{p['t_passing']:.3f}" for p in outputs.get("pairs", []))
+    caption = f"each failing world beside the nearest passing world on the latent segment toward it (boundary at t = {spots or 'none'})"
+    return "<h4>Why: the nearest passing world</h4>" + image(run_dir / outputs["counterfactuals"], caption)
+
+
 def headline_section(rows: list[Headline]) -> str:
     body = [
         [
@@ -291,6 +363,7 @@ def build_report(run_dir: Path | str) -> Path:
         "strategic": strategic_section(run_dir, results),
         "comparison": comparison_section(run_dir, results),
         "influence": influence_section(run_dir, results),
+        "atlas": atlas_section(run_dir, results),
         "headline": headline_section(headlines(results)),
     }
     nav = "<nav>" + "".join(f'<a href="#{anchor}">{esc(title)}</a>' for anchor, title in SECTIONS) + "</nav>"

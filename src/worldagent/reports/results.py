@@ -91,6 +91,9 @@ def env_results(run_dir: Path, env: str, manifest: dict) -> dict:
     if layout.store_path.exists():
         with RunStore(layout.store_path, create=False) as store:
             results.update(store_results(spec, store, done))
+    if done["atlas"].get("status") == "done" and "campaign" in done["atlas"].get("outputs", {}) and layout.store_path.exists():
+        with RunStore(layout.store_path, create=False) as store:
+            results["atlas"] = atlas_results(spec, store, done["atlas"]["outputs"])
     if done["influence"].get("status") == "done" and layout.influence_result.is_file():
         results["influence"] = json.loads(layout.influence_result.read_text())
     if layout.quality_path.is_file():
@@ -136,6 +139,47 @@ def store_results(spec, store, done: dict) -> dict:
         }
         out["compare"] = {"runs": runs}
     return out
+
+
+def atlas_results(spec, store, outputs: dict) -> dict:
+    """The atlas phase's numbers recomputed from the store: the archive's coverage and QD-score, the
+    failing and distinct failing worlds, their groups, and each failure-rate estimate replayed."""
+    from worldagent.analysis import failure_rate as fr
+    from worldagent.analysis.explanations import clusters
+    from worldagent.analysis.stored import read_estimate
+    from worldagent.errors import WorldagentError
+    from worldagent.influence.selection import parse_selection
+    from worldagent.search.atlas import distinct_count, qd_offset, read_atlas
+
+    atlas = read_atlas(store, outputs["campaign"])
+    scores = np.array([e.score for e in atlas.evaluations], np.float64)
+    found: dict[str, Any] = {
+        "atlas": atlas,
+        "evaluations": len(atlas.evaluations),
+        "coverage": atlas.archive.coverage(atlas.grid),
+        "qd_score": atlas.archive.qd_score(qd_offset(scores, atlas.maximize), atlas.maximize),
+    }
+    if not outputs.get("failure"):
+        return found
+    selection = parse_selection(outputs["failure"], spec.name)
+    failing = np.flatnonzero(selection.mask(atlas.evaluations))
+    latents = np.stack([atlas.evaluations[i].latent for i in failing]) if len(failing) else np.zeros((0, 1))
+    found |= {
+        "selection": selection,
+        "failing": len(failing),
+        "distinct_failing": distinct_count([atlas.evaluations[i].world for i in failing]),
+        "clusters": clusters(atlas.measures[failing], latents, seed=atlas.campaign.seed),
+        "failing_measures": atlas.measures[failing],
+        "estimates": {},
+    }
+    for method in fr.METHODS:
+        name = fr.campaign_name(method, selection.text, atlas.campaign.seed)
+        if store.campaign(name) is not None:
+            try:
+                found["estimates"][method] = read_estimate(store, name)
+            except WorldagentError as error:  # e.g. importance sampling that never met the event
+                found["estimates"][method] = str(error)
+    return found
 
 
 def pick(source: Any, *path) -> float | None:

@@ -5,9 +5,9 @@ Layout of ``<run>/<env>/``::
     dataset.npz            the procedurally generated worlds (paper §5.2.1)
     generator/             the VAE and G(z) (quality.json: its quality figures)
     agent/                 the training run (checkpoint, curve.csv/png, the saved agent in policy/)
-    store.sqlite           random / strategic (min, max) / comparison campaigns
+    store.sqlite           random / strategic (min, max) / comparison / atlas / failure-rate campaigns
     influence/             the influencing experiment (influence.json, its agents)
-    figures/               figures drawn by phases (strategic.png, comparison.png, influence.png, ...)
+    figures/               figures drawn by phases (strategic.png, comparison.png, influence.png, atlas.png, ...)
 """
 
 from __future__ import annotations
@@ -81,4 +81,5 @@ class RunLayout:
             "strategic": [self.figure("strategic")],
             "compare": [self.figure("comparison")],
             "influence": [self.influence_dir, self.figure("influence")],
+            "atlas": [self.figure("atlas"), self.figure("atlas_counterfactuals")],
         }

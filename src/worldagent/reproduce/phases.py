@@ -342,6 +342,67 @@ def influence_summary(result: dict) -> str:
     return "; ".join(parts)
 
 
+# -- beyond the paper: the failure atlas ----------------------------------------------------------
+
+ATLAS_CELLS = 10  # cells per descriptor of the atlas's grid (the spec's default descriptors)
+IMPORTANCE_ROUNDS = 4  # rounds of the importance sampler's search, each of a quarter of failure_worlds
+
+
+def atlas_phase(ctx: EnvContext) -> dict:
+    """A failure atlas of the agents (CMA-ME over the spec's default descriptors), why its failures
+    happen (nearest passing worlds, failure groups), and how likely ``spec.failure`` is (Monte Carlo
+    and importance sampling)."""
+    budgets, layout, spec = ctx.budgets, ctx.layout, ctx.spec
+    if budgets.atlas_budget < 1:
+        return {"skipped": "the preset's atlas_budget is 0", "summary": "skipped (atlas_budget 0)"}
+    from worldagent import experiments
+    from worldagent.reports.atlas import atlas_figure, counterfactual_figure
+
+    setup, failure = ctx.setup(), spec.failure or None
+    with ctx.store() as store:
+        found = experiments.atlas(
+            store, setup, ctx.metric, budget=budgets.atlas_budget, seed=ctx.seed, cells=ATLAS_CELLS, failure=failure, progress=ctx.progress
+        )
+        loaded = lambda e: (experiments.with_world(store, e), experiments.scored_keys_of(store, e))  # noqa: E731
+        figure = atlas_figure(found, setup, ctx.metric, False, loaded, layout.figure("atlas"))
+        outputs = {
+            "store": layout.rel(layout.store_path),
+            "campaign": found["evaluations"][0].campaign,
+            "figure": layout.rel(figure),
+            "failure": failure,
+        }
+        if failure:
+            explained = experiments.explain_failures(setup, found, experiments.failure_selection(failure, ctx.env), seed=ctx.seed)
+            pairs = counterfactual_figure(setup, explained["pairs"], layout.figure("atlas_counterfactuals"))
+            outputs["counterfactuals"] = layout.rel(pairs)
+            outputs["pairs"] = [{"t_failing": p["boundary"].t_failing, "t_passing": p["boundary"].t_passing} for p in explained["pairs"]]
+            outputs["estimates"] = failure_rates(ctx, store, setup) if budgets.failure_worlds else {}
+    rates = "; ".join(f"{m} P = {e['estimate']:.3g}" if "estimate" in e else f"{m}: {e['error']}" for m, e in outputs.get("estimates", {}).items())
+    failing = "" if found["distinct_failing"] is None else f", {found['distinct_failing']} distinct failing worlds"
+    outputs["summary"] = f"coverage {found['coverage']:.2f}, QD-score {found['qd_score']:.4g}{failing}" + (f"; {rates}" if rates else "")
+    return outputs
+
+
+def failure_rates(ctx: EnvContext, store, setup) -> dict[str, dict]:
+    """{method: estimate as a dict, or {"error": why}} of ``spec.failure`` (importance sampling fails
+    when its search never meets the event; Monte Carlo's bound is still a result)."""
+    from worldagent import experiments
+    from worldagent.analysis.failure_rate import ImportanceConfig
+
+    worlds = ctx.budgets.failure_worlds
+    importance = ImportanceConfig(round_worlds=max(20, worlds // 4), max_rounds=IMPORTANCE_ROUNDS)
+    found = {}
+    for method in ("mc", "is"):
+        try:
+            estimate = experiments.failure_rate(
+                store, setup, ctx.spec.failure, method=method, worlds=worlds, importance=importance, seed=ctx.seed, progress=ctx.progress
+            )[method]
+            found[method] = estimate.as_dict()
+        except WorldagentError as error:
+            found[method] = {"error": str(error)}
+    return found
+
+
 PHASE_FUNCTIONS: dict[str, Callable[[EnvContext], dict]] = {
     "dataset": dataset_phase,
     "generator": generator_phase,
@@ -350,6 +411,7 @@ PHASE_FUNCTIONS: dict[str, Callable[[EnvContext], dict]] = {
     "strategic": strategic_phase,
     "compare": compare_phase,
     "influence": influence_phase,
+    "atlas": atlas_phase,
 }
 
 # What each phase is computed from: restarting a phase restarts everything that depends on it.
@@ -361,6 +423,7 @@ DEPENDS = {
     "strategic": ("random",),
     "compare": ("random",),
     "influence": ("generator", "agent"),
+    "atlas": ("generator", "agent"),
 }
 
 

@@ -2,12 +2,12 @@
 
 For each environment the phases of ``phases.PHASE_FUNCTIONS`` run in order (dataset →
 generator → agent → random evaluation → strategic min/max → optimiser comparison →
-influencing), then the HTML report is built. The manifest (``manifest.py``) records each
+influencing → failure atlas), then the HTML report is built. The manifest (``manifest.py``) records each
 phase; a phase already done with the same config is skipped, an unfinished one runs again and
 resumes from its own checkpoint or store, and one done with another config is refused until
 ``restart`` names it (which also restarts every phase computed from it).
 
-The influencing phase is the last and the most likely to find nothing (no world may have the
+The influencing phase is the most likely to find nothing (no world may have the
 selected property at a small budget): its failure is recorded in the manifest and the report as
 that phase's result, and the run carries on to the report instead of crashing.
 """
@@ -152,6 +152,13 @@ def store_campaigns(ctx: EnvContext, phases: list[str]) -> list[str]:
     found = [names["min"], names["max"]] if "strategic" in phases else []
     if "compare" in phases:
         found += [n for group in compare_names(ctx).values() for n in group]
+    if "atlas" in phases:
+        from worldagent.analysis.failure_rate import METHODS, campaign_name
+
+        found.append(experiments.atlas_campaign_name(False, ctx.metric, ctx.seed))
+        if ctx.spec.failure:
+            event = experiments.failure_selection(ctx.spec.failure, ctx.env).text
+            found += [campaign_name(method, event, ctx.seed) for method in METHODS]
     return found
 
 

@@ -29,8 +29,16 @@ from dataclasses import dataclass, field, replace
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
-PHASES = ("dataset", "generator", "agent", "random", "strategic", "compare", "influence")
-OPTIONAL_BUDGETS = ("compare_budget", "bo_budget", "influence_search_budget", "train_envs", "learning_starts", "atlas_budget", "failure_worlds")  # 0 / None allowed
+PHASES = ("dataset", "generator", "agent", "random", "strategic", "compare", "influence", "atlas")
+OPTIONAL_BUDGETS = (
+    "compare_budget",
+    "bo_budget",
+    "influence_search_budget",
+    "train_envs",
+    "learning_starts",
+    "atlas_budget",
+    "failure_worlds",
+)  # 0 / None allowed
 
 
 @dataclass(frozen=True)
@@ -184,6 +192,12 @@ class Preset:
                 "search_budget": b.influence_search_budget,
                 "repeats": self.repeats,
                 "algo": self.algo_of(env),
+            },
+            "atlas": {
+                "budget": b.atlas_budget,
+                "failure": registry.get(env).failure,
+                "failure_worlds": b.failure_worlds,
+                "repeats": self.repeats,
             },
         }
         if phase not in table:

@@ -179,6 +179,13 @@ class Archive:
         return float(np.sum(self.scores - offset if maximize else offset - self.scores))
 
 
+def qd_offset(scores: np.ndarray, maximize: bool) -> float:
+    """The QD-score's offset: the worst finite score among those compared (0 when none is finite)."""
+    finite = np.asarray(scores, np.float64)
+    finite = finite[np.isfinite(finite)]
+    return float(finite.min() if maximize else finite.max()) if finite.size else 0.0
+
+
 def distinct_picks(archive: Any, maximize: bool, count: int) -> list[int]:
     """Up to ``count`` archive entries: the most extreme first, then each farthest (in normalised
     descriptor space) from those already picked, among the most extreme half."""

@@ -61,6 +61,18 @@ def test_racing_descriptors_on_hand_made_tracks():
     assert describe["track_length"](square) == pytest.approx(4.0, rel=1e-6)
 
 
+def test_harvest_descriptors_on_hand_made_maps():
+    from worldagent.envs.harvest.world import HarvestMap
+
+    describe = registry.get("harvest").metrics.descriptors
+    block = HarvestMap.from_str("AA...\nAA...\n..#..\n.....")  # 4 apples, each with 3 apple neighbours; 1 wall of 20 cells
+    scattered = HarvestMap.from_str("A...A\n.....\n.....\nA...A")  # 4 apples, none next to another
+    walled = HarvestMap.from_str("..#..\n###..\n.....\n.....")  # the tagger's corner is closed off from every other
+    assert describe["apple_clustering"](block) == 3.0 and describe["apple_clustering"](scattered) == 0.0
+    assert describe["wall_share"](block) == pytest.approx(1 / 20) and describe["wall_share"](walled) == pytest.approx(4 / 20)
+    assert describe["tagger_isolated"](walled) == 1.0 and describe["tagger_separated"](block) == 0.0
+
+
 def test_bad_atlas_input_gets_one_line_errors():
     spec = registry.get("racing")
     for names, cells, budget, message in [

@@ -1,21 +1,26 @@
-"""Train a racing agent at the paper's budget (10,000 episodes, §5.3), time it, and evaluate it.
+"""Train racing agents at the paper's budget (10,000 episodes, §5.3) over seeds × algorithms × observations, time and evaluate them.
 
-    python benchmarks/train_racing.py --algo ppo --out runs/agents/racing-ppo
+    python benchmarks/train_racing.py --algos ppo acktr --observations surroundings --seeds 0 1 2 3 4
 
 Training draws each episode's world uniformly from a procedural pool of 10,000 tracks (seeds
-0..9999, the paper's dataset). Evaluation (paper §6.1.1): 1,000 worlds sampled from the
-generator — G(z), z ~ N(0, I), from ``runs/generators/racing`` if that generator exists, else
-fresh procedural tracks (seeds 1,000,000 + i, never trained on) — 8 episodes each with the
-stochastic policy, one jitted ``vmap(vmap(rollout))``. Records wall time and env steps/s of
-training, crash rate, lap rate and the mean return, raw and normalised (the spec's
-``metrics.normalise``), with the machine (``machine.record``).
+0..9999, the paper's dataset). Evaluation (paper §6.1.1): ``--eval-worlds`` worlds sampled from
+the generator — G(z), z ~ N(0, I), from ``runs/generators/racing`` if that generator exists,
+else fresh procedural tracks (seeds 1,000,000 + i, never trained on) — ``--repeats`` episodes
+each with the stochastic policy, one jitted ``vmap(vmap(rollout))``. Each run records wall time
+and env steps/s of training, crash rate, lap rate, the rate of parked episodes (300 steps
+without a lap or a crash) and the mean return, raw and normalised (the spec's
+``metrics.normalise``).
 
-Algorithms and their default configs come from ``worldagent.agents.algorithms``.
+All runs go to ``benchmarks/results/<name>-<backend>.json`` (default name ``train-racing``) with
+the machine (``machine.record``): one row per (algorithm, observation, options, seed, episodes,
+evaluation), so later invocations add seeds to the same file; and per algorithm × observation,
+the seeds whose lap rate reaches ``LAP_TARGET`` (issue 13's target).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -24,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from machine import record  # noqa: E402
+from machine import RESULTS, describe_machine, record  # noqa: E402
 from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import LatentWorlds, world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
@@ -34,6 +39,8 @@ from worldagent.envs.racing.metrics import racing_return_bounds  # noqa: E402
 
 GENERATOR_DIR = Path("runs/generators/racing")
 SPEC = registry.get("racing")
+LAP_TARGET = 0.9
+KEY_FIELDS = ("algorithm", "observation", "options", "overrides", "seed", "episodes_budget", "eval_worlds", "repeats", "eval_source")
 
 
 def evaluate(policy, worlds, repeats: int, key, env, params) -> dict[str, np.ndarray]:
@@ -51,85 +58,149 @@ def evaluate(policy, worlds, repeats: int, key, env, params) -> dict[str, np.nda
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def evaluation_worlds(key, n: int, env):
-    """(worlds, description): G(z) from the lead's racing generator if present, else procedural."""
+def evaluation_worlds(key, n: int):
+    """(worlds, description): G(z) from the racing generator if present, else procedural."""
     if (GENERATOR_DIR / "generator.json").is_file():
         dist = world_distribution("racing", "vae", generator_dir=GENERATOR_DIR)
         assert isinstance(dist, LatentWorlds)
         return dist.sample_batch(key, n), f"G(z), z ~ N(0, I), generator {GENERATOR_DIR}"
     pool = world_distribution("racing", "generator", size=n, seed=1_000_000)
-    return pool.worlds, "procedural tracks, seeds 1,000,000..1,000,999 (no generator at runs/generators/racing)"
+    return pool.worlds, f"procedural tracks, seeds 1,000,000..{1_000_000 + n - 1} (no generator at {GENERATOR_DIR})"
+
+
+def run_one(algo: str, options: dict, seed: int, args, pool, out_root: Path) -> dict:
+    """Train one agent and evaluate it; the result row."""
+    env, params = SPEC.make_env(options)
+    overrides = args.overrides.get(algo, {})
+    config = training_config(SPEC, algo, episodes=args.episodes, **overrides)
+    tag = "-".join(f"{k}={v}" for k, v in sorted({**options, **overrides}.items()))
+    result = train(
+        SPEC,
+        algo,
+        config,
+        pool,
+        out_root / f"{algo}-{tag}-seed{seed}-{args.episodes}",
+        seed=seed,
+        options=options,
+        progress=not args.quiet,
+        resume=not args.no_resume,
+        distribution_spec="generator (procedural pool of 10,000, seeds 0..9999)",
+    )
+    start = time.perf_counter()
+    key_worlds, key_eval = jax.random.split(jax.random.key(args.eval_seed))
+    worlds, source = evaluation_worlds(key_worlds, args.eval_worlds)
+    metrics = evaluate(result.agent.policy, worlds, args.repeats, key_eval, env, params)
+    eval_seconds = time.perf_counter() - start
+    raw = metrics["return"]
+    parked = (metrics["steps"] >= int(params.max_steps)) & ~metrics["crashed"] & ~metrics["lap_completed"]
+    low, high = racing_return_bounds(params)
+    return {
+        "algorithm": algo,
+        "observation": options["observation"],
+        "options": options,
+        "overrides": overrides,
+        "seed": seed,
+        "episodes_budget": args.episodes,
+        "eval_worlds": args.eval_worlds,
+        "repeats": args.repeats,
+        "eval_source": source,
+        "config": config.to_dict(),
+        "train_seconds": round(result.wall_seconds, 1),
+        "resumed_from_update": result.resumed_from_update,
+        "episodes": result.episodes,
+        "env_steps": result.env_steps,
+        "env_steps_per_s": round(result.env_steps / result.wall_seconds),
+        "lap_rate": round(float(metrics["lap_completed"].mean()), 4),
+        "crash_rate": round(float(metrics["crashed"].mean()), 4),
+        "parked_rate": round(float(parked.mean()), 4),
+        "mean_return_raw": round(float(raw.mean()), 2),
+        "mean_return_normalised": round(float(SPEC.metrics.normalise(raw, params).mean()), 4),
+        "normalisation": f"clip((raw - {low}) / ({high} - {low}), 0, 1)",
+        "mean_steps": round(float(metrics["steps"].mean()), 1),
+        "eval_seconds": round(eval_seconds, 1),
+        "policy": "stochastic (samples its action distribution)",
+        "final_curve": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
+    }
+
+
+def summarise(runs: list[dict]) -> list[dict]:
+    """Per algorithm × observation × options × budget: seeds, how many lap at ``LAP_TARGET``, means."""
+    groups: dict[str, list[dict]] = {}
+    for run in runs:
+        key = json.dumps([run["algorithm"], run["options"], run.get("overrides", {}), run["episodes_budget"], run["eval_worlds"], run["repeats"]])
+        groups.setdefault(key, []).append(run)
+    table = []
+    for group in groups.values():
+        first = group[0]
+        mean = lambda name: round(float(np.mean([r[name] for r in group])), 4)  # noqa: E731
+        table.append(
+            {
+                "algorithm": first["algorithm"],
+                "options": first["options"],
+                "overrides": first.get("overrides", {}),
+                "episodes_budget": first["episodes_budget"],
+                "eval": f"{first['eval_worlds']} worlds x {first['repeats']}",
+                "seeds": sorted(r["seed"] for r in group),
+                "seeds_at_lap_target": sum(r["lap_rate"] >= LAP_TARGET for r in group),
+                "seeds_parked": sum(r["parked_rate"] > 0.5 for r in group),
+                **{f"mean_{name}": mean(name) for name in ("lap_rate", "crash_rate", "parked_rate", "mean_return_normalised", "train_seconds")},
+            }
+        )
+    return table
+
+
+def previous_runs(name: str) -> list[dict]:
+    """Runs already recorded under ``name`` on this backend (so invocations add to one file)."""
+    path = RESULTS / f"{name}-{describe_machine()['backend']}.json"
+    return json.loads(path.read_text()).get("runs", []) if path.is_file() else []
+
+
+def parse_overrides(texts: list[str]) -> dict[str, dict]:
+    """``{algo: {field: value}}`` from ``ALGO.FIELD=JSON`` strings."""
+    overrides: dict[str, dict] = {}
+    for text in texts:
+        name, _, value = text.partition("=")
+        algo, _, field = name.partition(".")
+        overrides.setdefault(algo, {})[field] = json.loads(value)
+    return overrides
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--algo", choices=SPEC.algorithms, default=SPEC.default_algorithm)
-    parser.add_argument("--out", type=Path, default=None)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--algos", "--algo", nargs="+", choices=SPEC.algorithms, default=list(SPEC.algorithms))
+    parser.add_argument("--observations", nargs="+", default=["route"], help="racing observations (route, surroundings)")
+    parser.add_argument("--option", action="append", default=[], help="another racing option NAME=VALUE, e.g. reach=96")
+    parser.add_argument("--set", action="append", default=[], help="a config field ALGO.FIELD=JSON, e.g. ppo.crash_warmup=0.3")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
     parser.add_argument("--episodes", type=int, default=10_000)
     parser.add_argument("--eval-worlds", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=8)
+    parser.add_argument("--eval-seed", type=int, default=1, help="key of the evaluation worlds and episodes (the same for every run)")
+    parser.add_argument("--name", default="train-racing", help="results file: benchmarks/results/NAME-<backend>.json")
+    parser.add_argument("--out-root", type=Path, default=Path("runs/agents/train-racing"))
     parser.add_argument("--no-resume", action="store_true")
+    parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args()
+    args.overrides = parse_overrides(args.set)
 
-    env, params = SPEC.make_env()
-    out = args.out or Path(f"runs/agents/racing-{args.algo}")
-    config = training_config(SPEC, args.algo, episodes=args.episodes)
     start = time.perf_counter()
     pool = world_distribution("racing", "generator", size=10_000, seed=0)
-    pool_seconds = time.perf_counter() - start
-    result = train(
-        SPEC,
-        args.algo,
-        config,
-        pool,
-        out,
-        seed=args.seed,
-        progress=True,
-        resume=not args.no_resume,
-        distribution_spec="generator (procedural pool of 10,000, seeds 0..9999)",
-    )
-    steps_per_s = result.env_steps / result.wall_seconds
-
-    start = time.perf_counter()
-    key_worlds, key_eval = jax.random.split(jax.random.key(args.seed + 1))
-    worlds, source = evaluation_worlds(key_worlds, args.eval_worlds, env)
-    metrics = evaluate(result.agent.policy, worlds, args.repeats, key_eval, env, params)
-    eval_seconds = time.perf_counter() - start
-    raw = metrics["return"]
-    low, high = racing_return_bounds(params)
-    summary = {
-        "algorithm": args.algo,
-        "config": config.to_dict(),
-        "seed": args.seed,
-        "pool_seconds": round(pool_seconds, 2),
-        "train_seconds": round(result.wall_seconds, 2),
-        "resumed_from_update": result.resumed_from_update,
-        "episodes": result.episodes,
-        "env_steps": result.env_steps,
-        "env_steps_per_s": round(steps_per_s),
-        "evaluation": {
-            "worlds": args.eval_worlds,
-            "repeats": args.repeats,
-            "source": source,
-            "policy": "stochastic (samples its action distribution)",
-            "crash_rate": round(float(metrics["crashed"].mean()), 4),
-            "lap_rate": round(float(metrics["lap_completed"].mean()), 4),
-            "mean_return_raw": round(float(raw.mean()), 2),
-            "mean_return_normalised": round(float(SPEC.metrics.normalise(raw, params).mean()), 4),
-            "normalisation": f"clip((raw - {low}) / ({high} - {low}), 0, 1), envs/racing/metrics.py",
-            "mean_steps": round(float(metrics["steps"].mean()), 1),
-            "seconds": round(eval_seconds, 2),
-        },
-        "final_curve": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
-    }
-    ev = summary["evaluation"]
-    print(
-        f"{args.algo}: {result.episodes:,} episodes, {result.env_steps:,} env steps in {result.wall_seconds:.0f} s "
-        f"({steps_per_s:,.0f} steps/s); eval on {args.eval_worlds} worlds x {args.repeats}: crash {ev['crash_rate']:.3f}, "
-        f"lap {ev['lap_rate']:.3f}, return {ev['mean_return_raw']:.1f} raw / {ev['mean_return_normalised']:.3f} normalised"
-    )
-    print(f"recorded in {record(f'train_racing_{args.algo}', summary)}")
+    print(f"pool of 10,000 tracks in {time.perf_counter() - start:.0f} s")
+    for observation in args.observations:
+        options = SPEC.parse_options([f"observation={observation}", *args.option])
+        for algo in args.algos:
+            for seed in args.seeds:
+                run = run_one(algo, options, seed, args, pool, args.out_root)
+                print(
+                    f"{algo} {observation} {options} seed {seed}: {run['episodes']:,} episodes, {run['env_steps']:,} steps in "
+                    f"{run['train_seconds']:.0f} s; eval {args.eval_worlds} x {args.repeats}: lap {run['lap_rate']:.3f}, "
+                    f"crash {run['crash_rate']:.3f}, parked {run['parked_rate']:.3f}, normalised {run['mean_return_normalised']:.3f}",
+                    flush=True,
+                )
+                key = [run[f] for f in KEY_FIELDS]
+                runs = [r for r in previous_runs(args.name) if [r.get(f) for f in KEY_FIELDS] != key] + [run]  # reread: runs in parallel add theirs
+                path = record(args.name, {"lap_target": LAP_TARGET, "summary": summarise(runs), "runs": runs})
+    print(f"recorded in {path}")
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 
 from worldagent.agents.kfac import KFAC, KFACConfig
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.ppo import TrainState, single_agent_trainer, update_row
+from worldagent.agents.ppo import TrainState, single_agent_trainer, update_row, warmed_params
 from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
 from worldagent.agents.trainer import Trainer, raw_key
 from worldagent.configs import JsonConfig
@@ -67,6 +67,8 @@ class ACKTRConfig(JsonConfig):
             carries on from the centreline; evaluation keeps the paper's rule) [ours: without it
             early crashes end episodes after ~15 steps and the 10,000-episode budget buys ~150,000
             steps; the agent learnt to park].
+        crash_warmup: fraction of the budget over which the training crash penalty ramps up
+            from 0 (``ppo.warmed_params``; 0: off) [ours].
     """
 
     total_episodes: int = 10_000
@@ -87,6 +89,7 @@ class ACKTRConfig(JsonConfig):
     hidden: tuple[int, ...] = (128, 128)
     activation: str = "tanh"
     respawn: bool = True
+    crash_warmup: float = 0.0
 
     def __post_init__(self):
         for name in ("total_episodes", "num_envs", "num_steps", "inverse_every"):
@@ -104,6 +107,8 @@ class ACKTRConfig(JsonConfig):
                 raise WorldagentError(f"ACKTRConfig.{name}={getattr(self, name)!r}; it must be in [0, 1).")
         if self.ent_coef < 0 or self.vf_coef < 0:
             raise WorldagentError("ACKTRConfig.ent_coef and vf_coef must be non-negative.")
+        if not 0.0 <= self.crash_warmup <= 1.0:
+            raise WorldagentError(f"ACKTRConfig.crash_warmup={self.crash_warmup!r}; it must be a fraction of the budget in [0, 1].")
         if not self.hidden or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in self.hidden):
             raise WorldagentError(f"ACKTRConfig.hidden={self.hidden!r}; give one or more positive layer widths.")
         if self.activation not in ("tanh", "relu"):
@@ -162,6 +167,8 @@ def _core(config: ACKTRConfig, env):
     def update(state: TrainState, consts) -> tuple[TrainState, dict]:
         params_env, distribution = consts
         key, key_roll, key_fisher = jax.random.split(jax.random.wrap_key_data(state.key), 3)
+        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
+        params_env = warmed_params(params_env, config.crash_warmup, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         returns = targets(traj, last_value)
         obs = traj.obs.reshape(batch, *traj.obs.shape[2:])
@@ -183,7 +190,6 @@ def _core(config: ACKTRConfig, env):
             return jnp.sum(action_log_prob(logits, sampled)) - jnp.sum((value - target) ** 2)
 
         _, (policy_loss, value_loss, ent), grads, stats = kfac.gradients(key_fisher, state.params, (obs,), loss_fn, fisher_fn)
-        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
         scale = (1.0 - fraction) if config.anneal_lr else jnp.float32(1.0)
         params, opt_state, info = kfac.update(
             jax.tree_util.tree_map(lambda g: scale * g, grads), stats, state.opt_state, state.params["params"]

@@ -66,6 +66,9 @@ class PPOConfig(JsonConfig):
         respawn: train with ``RacingParams.respawn``: a crash costs its penalty and the agent
             carries on from the centreline, so every episode teaches up to 300 steps
             (evaluation keeps the paper's rule: a crash ends the episode).
+        crash_warmup: fraction of the episode budget over which the training crash penalty
+            (``crash_penalty``, where the env params have one) ramps linearly from 0 to its
+            value; 0: the full penalty from the start. Evaluation always pays the full penalty.
     """
 
     total_episodes: int = 10_000
@@ -86,6 +89,7 @@ class PPOConfig(JsonConfig):
     hidden: tuple[int, ...] = (128, 128)
     activation: str = "tanh"
     respawn: bool = True
+    crash_warmup: float = 0.0
 
     def __post_init__(self):
         for name in ("total_episodes", "num_envs", "num_steps", "update_epochs", "num_minibatches"):
@@ -105,6 +109,8 @@ class PPOConfig(JsonConfig):
                 raise WorldagentError(f"PPOConfig.{name}={getattr(self, name)!r}; it must be in [0, 1].")
         if self.ent_coef < 0 or self.vf_coef < 0:
             raise WorldagentError("PPOConfig.ent_coef and vf_coef must be non-negative.")
+        if not 0.0 <= self.crash_warmup <= 1.0:
+            raise WorldagentError(f"PPOConfig.crash_warmup={self.crash_warmup!r}; it must be a fraction of the budget in [0, 1].")
         if not self.hidden or any(not isinstance(w, int) or w < 1 for w in self.hidden):
             raise WorldagentError(f"PPOConfig.hidden={self.hidden!r}; give one or more positive layer widths.")
         if self.activation not in ("tanh", "relu"):
@@ -139,6 +145,15 @@ class TrainState:
 def training_params(env_params, respawn: bool):
     """The env params a learner trains under: respawn-on-crash set as configured, where params have it."""
     return env_params.replace(respawn=respawn) if hasattr(env_params, "respawn") else env_params
+
+
+def warmed_params(env_params, crash_warmup: float, fraction: jax.Array):
+    """The env params at ``fraction`` of the budget: ``crash_penalty`` (where the params have one)
+    ramped from 0 over the first ``crash_warmup`` of it, so a learner first finds that driving
+    pays before crashes teach it to stop (see ``PPOConfig.crash_warmup``)."""
+    if not crash_warmup or not hasattr(env_params, "crash_penalty"):
+        return env_params
+    return env_params.replace(crash_penalty=env_params.crash_penalty * jnp.clip(fraction / crash_warmup, 0.0, 1.0))
 
 
 def max_updates(total_episodes: int, num_envs: int, num_steps: int, max_episode_steps: int) -> int:
@@ -235,11 +250,12 @@ def _core(config: PPOConfig, env):
     def update(state: TrainState, consts) -> tuple[TrainState, dict]:
         params_env, distribution = consts
         key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
+        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
+        params_env = warmed_params(params_env, config.crash_warmup, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
         flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731
         data = tuple(map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets)))
-        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
         lr = config.learning_rate * (1.0 - fraction) if config.anneal_lr else jnp.float32(config.learning_rate)
         (params, opt_state), aux = learn(state.params, state.opt_state, data, lr, key_perm)
         summary = episode_summary(traj)

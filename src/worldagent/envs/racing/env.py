@@ -13,14 +13,24 @@ instead of O(K), and a jump across the grass onto another part of the track is n
 road" (no shortcuts). The radius covers the largest distance the particle can move in one step
 (``force / friction``) on the shortest tracks with margin; ``tests/envs/racing`` checks it.
 
-Observation (f32[W·W + 4 + 2·R]): optionally the ``W×W`` window of the world's 128×128 road
-mask around the agent (1 = road, 0 = grass, row 0 to the north, column 0 to the west),
-flattened; then the position (x, y) in normalised coordinates, the velocity divided by the top
-speed ``force / friction``, and the route ahead: the R centreline points ``route`` segments
-beyond the agent's, relative to the agent, divided by ``ROUTE_SCALE`` (what a navigation
-display shows). The default is the route without the window (``window=0``): with the paper's
-16×16 window alone, or the window and the route together, neither PPO nor ACKTR learnt to lap
-within 10,000 episodes; with the route alone both do (see ``agents/training.py``).
+Observations (``ParticleRacing.observation``):
+
+- ``"route"`` (the default), f32[W·W + 4 + 2·R]: optionally the ``W×W`` window of the world's
+  128×128 road mask around the agent (1 = road, 0 = grass, row 0 to the north, column 0 to the
+  west), flattened; then the position (x, y) in normalised coordinates, the velocity divided by
+  the top speed ``force / friction``, and the route ahead: the R centreline points ``route``
+  segments beyond the agent's, relative to the agent, divided by ``ROUTE_SCALE`` (what a
+  navigation display shows). With the paper's 16×16 window alone, or the window and the route
+  together, neither PPO nor ACKTR learnt to lap within 10,000 episodes; with the route alone
+  both do (see ``agents/training.py``).
+- ``"surroundings"`` (the paper's, §5.1.1, Figure 4: the road around the agent, its position and
+  velocity, no route), f32[W·W + C·C + 4]: the ``W×W`` road window at full resolution, then a
+  coarse view: the ``reach×reach`` pixels around the agent averaged in blocks to ``C×C``
+  (fraction of road per block; pixels off the mask read as grass); then position and velocity
+  as above. The fine window shows where the road's edges are (it is 2.5 pixels wide); the
+  coarse one shows the corners ahead: at top speed (2.6 pixels a step) a 16-pixel window is 3
+  steps of sight, shorter than the ~10 steps braking takes (``docs/racing.md`` has the designs
+  tried and what they reached).
 
 Training-time respawn (``RacingParams.respawn``): a crash costs the crash penalty, puts the
 particle back on the centreline at rest and the episode goes on (``crashed`` stays true). With
@@ -50,6 +60,10 @@ ACTION_NAMES = ("east", "west", "north", "south")
 # units: from the next step to the next sharp corner at full speed), in units of ROUTE_SCALE.
 ROUTE_OFFSETS = (1, 3, 5, 8, 11, 15, 20, 26)
 ROUTE_SCALE = 0.1
+
+OBSERVATIONS = ("route", "surroundings", "rays")
+RAY_DIRECTIONS = 16  # "rays": directions, evenly spaced from east, counter-clockwise
+RAY_SAMPLES_PER_PIXEL = 2  # "rays": samples along each ray per road-mask pixel
 
 
 @struct.dataclass
@@ -150,15 +164,21 @@ class ParticleRacing(Environment):
     """The Particle Racing environment; static configuration only (see module docstring).
 
     Attributes:
-        window: side W of the square road window in the observation, in road-mask pixels (1/64
-            units each); 0 for none (the default).
-        route: segments ahead of the agent's whose centreline points are observed (may be empty).
+        observation: "route" (the default) or "surroundings" (the paper's; see the module docstring).
+        window: side W of the square full-resolution road window, in road-mask pixels (1/64
+            units each); 0 for none (the default with "route"; "surroundings" needs one).
+        route: segments ahead of the agent's whose centreline points are observed with "route".
+        reach: side of the region of the coarse view of "surroundings", road-mask pixels.
+        coarse: side C of the coarse view's grid (``reach`` must be a multiple of it).
         search_radius: segments searched either side of the last one to locate the agent.
         num_points: centreline points K of the worlds this env accepts.
     """
 
+    observation: str = "route"
     window: int = 0
     route: tuple[int, ...] = ROUTE_OFFSETS
+    reach: int = 64
+    coarse: int = 16
     search_radius: int = 8
     num_points: int = NUM_POINTS
 
@@ -166,8 +186,14 @@ class ParticleRacing(Environment):
 
     def __post_init__(self):
         largest = int(ROAD_SIZE * (1.0 - MAX_EXTENT - 2 * HALF_WIDTH))
+        if self.observation not in OBSERVATIONS:
+            raise WorldagentError(f"observation={self.observation!r}; use one of {', '.join(OBSERVATIONS)}.")
         if not 0 <= self.window <= largest:
             raise WorldagentError(f"window={self.window} is out of range; use 0 (none) to {largest} road-mask pixels.")
+        if self.observation == "surroundings" and not (self.window >= 1 and self.coarse >= 1 and self.reach % self.coarse == 0):
+            raise WorldagentError(
+                f"surroundings need window >= 1 and reach a multiple of coarse (window={self.window}, reach={self.reach}, coarse={self.coarse}); e.g. 16, 64, 16."
+            )
         if any(not 1 <= offset < self.num_points for offset in self.route):
             raise WorldagentError(f"route={self.route}: offsets must be 1 to {self.num_points - 1} segments ahead.")
         if self.search_radius < 1 or 2 * self.search_radius + 1 > self.num_points:
@@ -183,6 +209,10 @@ class ParticleRacing(Environment):
 
     @property
     def observation_shape(self) -> tuple[int, ...]:
+        if self.observation == "surroundings":
+            return (self.window * self.window + self.coarse * self.coarse + 4,)
+        if self.observation == "rays":
+            return (RAY_DIRECTIONS + 4,)
         return (self.window * self.window + 4 + 2 * len(self.route),)
 
     # -- host-side checks (shapes always; values whenever they are concrete) ------------------
@@ -269,13 +299,20 @@ class ParticleRacing(Environment):
         return episode_metrics(state)
 
     def observe(self, state: RacingState, params: RacingParams) -> jax.Array:
-        """f32[W·W + 4 + 2·R]: road window (if any), position, velocity / top speed, route ahead."""
-        centreline = state.world.centreline
-        ahead = centreline[(state.segment + jnp.asarray(self.route, jnp.int32)) % centreline.shape[0]]
+        """f32[``observation_shape``]: see the module docstring for each ``observation``."""
         top_speed = params.force / params.friction
-        parts = [state.position, state.velocity / top_speed, ((ahead - state.position) / ROUTE_SCALE).reshape(-1)]
-        if self.window:
-            parts.insert(0, road_window(state.world.road, state.position, self.window).reshape(-1))
+        motion = [state.position, state.velocity / top_speed]
+        if self.observation == "surroundings":
+            fine, coarse = surroundings_view(state.world.road, state.position, self.window, self.reach, self.coarse)
+            parts = [fine.reshape(-1), coarse.reshape(-1), *motion]
+        elif self.observation == "rays":
+            parts = [road_rays(state.world.road, state.position, self.reach // 2), *motion]
+        else:
+            centreline = state.world.centreline
+            ahead = centreline[(state.segment + jnp.asarray(self.route, jnp.int32)) % centreline.shape[0]]
+            parts = [*motion, ((ahead - state.position) / ROUTE_SCALE).reshape(-1)]
+            if self.window:
+                parts.insert(0, road_window(state.world.road, state.position, self.window).reshape(-1))
         return jnp.concatenate([p.astype(jnp.float32) for p in parts])
 
 
@@ -308,6 +345,52 @@ def road_window(road: jax.Array, position: jax.Array, window: int) -> jax.Array:
     high = jnp.take(rows, word + 1, axis=1, mode="fill", fill_value=0)
     bits = (low >> shift) | jnp.where(shift > 0, high << ((32 - shift) % 32), 0)
     return (bits[:, None] >> jnp.arange(window, dtype=jnp.uint32)) & 1
+
+
+def road_pixels(road: jax.Array, position: jax.Array, side: int) -> jax.Array:
+    """u32[side, side] 0/1 on-road pixels of the square centred on ``position``; off the mask reads 0 (grass).
+
+    Unpacks the ``side`` rows of ``road`` (bit-packed, ``world.pack_road``) whole, then gathers
+    the columns, so any ``side`` and any position work (``road_window``'s single read does not).
+    """
+    start = jnp.round(_to_pixel_jnp(position, ROAD_SIZE)).astype(jnp.int32) - side // 2
+    rows = jnp.take(road, start[0] + jnp.arange(side), axis=0, mode="fill", fill_value=0)
+    bits = (rows[:, :, None] >> jnp.arange(32, dtype=jnp.uint32)) & 1  # bit k of word j: column 32·j + k
+    return jnp.take(bits.reshape(side, -1), start[1] + jnp.arange(side), axis=1, mode="fill", fill_value=0)
+
+
+def surroundings_view(road: jax.Array, position: jax.Array, window: int, reach: int, coarse: int) -> tuple[jax.Array, jax.Array]:
+    """The "surroundings" observation's images: (u32[W, W] road window, f32[C, C] coarse view).
+
+    The window is ``road_window``'s; the coarse view is the fraction of road pixels in each
+    ``reach / C``-pixel block of the ``reach×reach`` square around ``position``.
+    """
+    side = max(reach, window)
+    pixels = road_pixels(road, position, side)
+    fine_at, region_at = side // 2 - window // 2, side // 2 - reach // 2  # both centred like road_window
+    fine = pixels[fine_at : fine_at + window, fine_at : fine_at + window]
+    region = pixels[region_at : region_at + reach, region_at : region_at + reach].astype(jnp.float32)
+    block = reach // coarse
+    return fine, region.reshape(coarse, block, coarse, block).mean(axis=(1, 3))
+
+
+def road_rays(road: jax.Array, position: jax.Array, reach: int) -> jax.Array:
+    """f32[RAY_DIRECTIONS] in [0, 1]: how far the road goes from ``position`` in each direction, over ``reach`` pixels.
+
+    Each ray is sampled every half pixel of the road mask (``world.pack_road``; off the mask is
+    grass); its value is the fraction of ``reach`` before the first grass sample (1: road all the way).
+    """
+    angles = jnp.arange(RAY_DIRECTIONS) * (2 * jnp.pi / RAY_DIRECTIONS)
+    distances = jnp.arange(1, reach * RAY_SAMPLES_PER_PIXEL + 1) / RAY_SAMPLES_PER_PIXEL  # pixels
+    # (row, col) offsets: x (east) is +col, y (north) is -row
+    rows = _to_pixel_jnp(position, ROAD_SIZE)[0] - jnp.sin(angles)[:, None] * distances
+    cols = _to_pixel_jnp(position, ROAD_SIZE)[1] + jnp.cos(angles)[:, None] * distances
+    r, c = jnp.round(rows).astype(jnp.int32), jnp.round(cols).astype(jnp.int32)
+    inside = (r >= 0) & (r < road.shape[0]) & (c >= 0) & (c < road.shape[0])
+    words = road[jnp.clip(r, 0, road.shape[0] - 1), jnp.clip(c, 0, road.shape[0] - 1) // 32]
+    on_road = inside & (((words >> (jnp.clip(c, 0, road.shape[0] - 1) % 32).astype(jnp.uint32)) & 1) == 1)
+    clear = jnp.cumprod(on_road, axis=1)  # 1 until the first grass sample
+    return clear.sum(axis=1) / distances.shape[0]
 
 
 def episode_metrics(state: RacingState) -> dict[str, jax.Array]:

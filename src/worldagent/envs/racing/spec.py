@@ -4,19 +4,39 @@ from __future__ import annotations
 
 import numpy as np
 
-from worldagent.envs.registry import EnvSpec, Metrics, Pictures, ScriptedPolicy, register
+from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
 from worldagent.envs.repairs import NearestWorld
 
 CORNER_SPAN = 8  # centreline segments over which a corner's turning is summed (256 per lap)
+PAPER_WINDOW = 16  # the "surroundings" observation's full-resolution window (the paper's 16×16)
 
 
 def make(options):
-    """``ParticleRacing()`` and its default params (racing has no options yet)."""
+    """``ParticleRacing`` with the chosen observation, and its default params."""
     from worldagent.envs.racing.env import ParticleRacing
 
-    del options
-    env = ParticleRacing()
+    if options["observation"] == "surroundings":
+        env = ParticleRacing(observation="surroundings", window=PAPER_WINDOW, reach=options["reach"])
+    elif options["observation"] == "rays":
+        env = ParticleRacing(observation="rays", reach=options["reach"])
+    else:
+        env = ParticleRacing()
     return env, env.default_params
+
+
+def parse_observation(text: str) -> str:
+    from worldagent.envs.racing.env import OBSERVATIONS
+
+    if text not in OBSERVATIONS:
+        raise ValueError(f"unknown observation {text!r}; use {' or '.join(OBSERVATIONS)}")
+    return text
+
+
+def parse_reach(text: str) -> int:
+    value = int(text)
+    if value < 16 or value % 16:
+        raise ValueError(f"reach={value}; use a multiple of 16 pixels, e.g. 64")
+    return value
 
 
 def generate(seeds):
@@ -124,6 +144,15 @@ SPEC = register(
         name="racing",
         description="Particle Racing (paper §5.1.1): one particle laps a CarRacing track; leaving the road is a crash.",
         make=make,
+        options=(
+            EnvOption(
+                "observation",
+                "route: position, velocity and 8 centreline points ahead; surroundings: the paper's, the road around the agent, position, velocity",
+                parse_observation,
+                "route",
+            ),
+            EnvOption("reach", "surroundings: side of the coarse road view around the agent, pixels of 1/64 unit (multiple of 16)", parse_reach, 64),
+        ),
         world_type=__import__("worldagent.envs.racing.world", fromlist=["Track"]).Track,
         generate=generate,
         cells=cells,

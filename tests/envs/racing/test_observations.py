@@ -1,0 +1,97 @@
+"""Racing's observations without a route: the road around the agent ("surroundings", "rays"), its shape, what it sees, jit and vmap."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from worldagent.envs import registry
+from worldagent.envs.racing.env import RAY_DIRECTIONS, ParticleRacing, RacingParams, road_pixels, road_rays
+from worldagent.envs.racing.world import ROAD_SIZE, to_pixel, unpack_road
+from worldagent.errors import WorldagentError
+
+PARAMS = RacingParams()
+KEY = jax.random.key(0)
+SURROUNDINGS = ParticleRacing(observation="surroundings", window=16, reach=64, coarse=16)
+RAYS = ParticleRacing(observation="rays", reach=64)
+
+
+def first(tracks, i=0):
+    return jax.tree_util.tree_map(lambda x: x[i], tracks)
+
+
+@pytest.mark.parametrize("env, size", [(SURROUNDINGS, 16 * 16 + 16 * 16 + 4), (RAYS, RAY_DIRECTIONS + 4)])
+def test_observation_shape_and_no_route(track, env, size):
+    obs, state = env.reset(KEY, track, PARAMS)
+    assert obs.shape == env.observation_shape == (size,) and obs.dtype == jnp.float32
+    np.testing.assert_allclose(obs[-4:-2], track.centreline[0])  # position, then velocity (at rest)
+    np.testing.assert_array_equal(obs[-2:], 0.0)
+    _, moved = env.place(state, np.asarray(track.centreline[40]), [0.0, 0.0], PARAMS)
+    assert moved.segment != state.segment
+    far = np.asarray(track.centreline[40]) + np.array([0.0, 0.0])
+    _, same_place = env.place(state, far, [0.0, 0.0], PARAMS)
+    np.testing.assert_array_equal(env.observe(moved, PARAMS), env.observe(same_place, PARAMS))  # a function of where it is, not of the route
+
+
+def test_road_pixels_is_the_unpacked_mask_with_grass_beyond_it(tracks):
+    world = first(tracks, 3)
+    road = np.pad(unpack_road(world.road), 40)  # off the mask is grass
+    for position in [*np.asarray(world.centreline[::37]), np.array([0.98, -0.97], np.float32)]:
+        row, col = np.round(to_pixel(position, ROAD_SIZE)).astype(int) - 32 + 40
+        np.testing.assert_array_equal(road_pixels(world.road, jnp.asarray(position), 64), road[row : row + 64, col : col + 64])
+
+
+def test_surroundings_see_the_road(track):
+    """On the centreline the fine window's centre is road and the coarse view has road; on the grass neither."""
+    _, state = SURROUNDINGS.reset(KEY, track, PARAMS)
+    on_road = np.asarray(SURROUNDINGS.observe(state, PARAMS))
+    grass = np.asarray(SURROUNDINGS.observe(state.replace(position=jnp.array([0.95, 0.95])), PARAMS))  # a corner of the field
+    fine, coarse = on_road[:256].reshape(16, 16), on_road[256:512].reshape(16, 16)
+    assert fine[7:9, 7:9].all() and 0 < fine.mean() < 0.5
+    assert 0 < coarse.mean() < 0.5 and coarse.max() <= 1.0
+    assert not grass[:256].any()
+    assert not np.array_equal(on_road[:512], grass[:512])
+
+
+def test_rays_measure_the_road_ahead_on_a_straight(track):
+    """On the start straight (heading north) the north and south rays run far; the east and west ones end at the kerb."""
+    _, state = RAYS.reset(KEY, track, PARAMS)
+    rays = np.asarray(road_rays(state.world.road, state.position, 32))
+    east, north, west, south = (rays[i * RAY_DIRECTIONS // 4] for i in range(4))
+    assert north > 0.2 and south > 0.2
+    assert east < 0.1 and west < 0.1
+    assert np.all((rays >= 0) & (rays <= 1))
+    off = np.asarray(road_rays(state.world.road, jnp.array([0.95, 0.95]), 32))
+    np.testing.assert_array_equal(off, 0.0)  # on the grass no ray starts on the road
+
+
+@pytest.mark.parametrize("env", [SURROUNDINGS, RAYS], ids=["surroundings", "rays"])
+def test_observations_equal_under_jit_and_vmap(tracks, env):
+    worlds = jax.tree_util.tree_map(lambda x: x[:4], tracks)
+    positions = jnp.asarray(np.asarray(worlds.centreline[:, 17]) + 0.005)
+    velocities = jnp.full((4, 2), 0.01)
+
+    def observe(world, position, velocity):
+        _, state = env.reset(KEY, world, PARAMS)
+        return env.observe(state.replace(position=position, velocity=velocity), PARAMS)
+
+    eager = np.stack([observe(first(worlds, i), positions[i], velocities[i]) for i in range(4)])
+    np.testing.assert_array_equal(jax.jit(jax.vmap(observe))(worlds, positions, velocities), eager)
+    np.testing.assert_array_equal(jax.jit(observe)(first(worlds, 1), positions[1], velocities[1]), eager[1])
+
+
+def test_spec_option_picks_the_observation():
+    spec = registry.get("racing")
+    assert spec.make_env()[0].observation == "route"
+    env, _ = spec.make_env(spec.parse_options(["observation=surroundings", "reach=96"]))
+    assert env.observation == "surroundings" and env.reach == 96 and env.window == 16
+    with pytest.raises(WorldagentError, match="observation"):
+        spec.parse_options(["observation=pixels"])
+    with pytest.raises(WorldagentError, match="multiple of 16"):
+        spec.parse_options(["reach=50"])
+    with pytest.raises(WorldagentError, match="reach a multiple of coarse"):
+        ParticleRacing(observation="surroundings", window=16, reach=50, coarse=16)
+    with pytest.raises(WorldagentError, match="observation="):
+        ParticleRacing(observation="pixels")

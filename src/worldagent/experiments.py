@@ -416,22 +416,17 @@ def atlas(
     Returns:
         ``atlas_summary`` of the campaign.
     """
-    from worldagent.search.atlas import Grid, QDConfig, QDOptimiser, check_descriptors, describer, grid_ranges
+    from worldagent.search.atlas import atlas_optimiser
 
     metric = setup.metric(metric)
-    names, shape = check_descriptors(setup.spec, descriptors, cells, budget)
+    optimiser, extra = atlas_optimiser(setup.spec, setup.generator, maximize, seed, budget, descriptors, cells)
     selection = failure_selection(failure, setup.spec.name)
-    describe = describer(setup.spec, setup.generator, names)
-    dim = setup.generator.latent_dim
-    grid = Grid(names, shape, grid_ranges(describe, dim, names, seed))
-    config = QDConfig()
-    optimiser = QDOptimiser(dim, maximize, seed, grid, describe, config)
     name = name or atlas_campaign_name(maximize, metric, seed)
-    extra = {"atlas": {"grid": grid.record(), **dataclasses.asdict(config)}}
+    dim = setup.generator.latent_dim
     spec = CampaignSpec(name, setup.spec.name, metric, maximize, "cma-me", int(budget), int(seed), dim, agent=agent_record(setup.policy), extra=extra)
     objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
     run_campaign(store, spec, objective, resume=resume, progress=progress, backend=setup.backend, optimiser=optimiser)
-    return atlas_summary(store, grid, describe, [name], maximize, selection)[name]
+    return atlas_summary(store, optimiser.grid, optimiser.describe, [name], maximize, selection)[name]
 
 
 def atlas_summary(store: RunStore, grid: Any, describe: Any, campaigns: Sequence[str], maximize: bool, failure: Any = None) -> dict:
@@ -538,6 +533,7 @@ def influence(
     seeds: Sequence[int] = (0, 1, 2),
     candidates: int = 500,
     search_budget: int = 0,
+    search: str = "cmaes",
     eval_worlds: int = 200,
     config: Any = None,
     seed: int = 0,
@@ -568,6 +564,7 @@ def influence(
         seeds=seeds,
         candidates=candidates,
         search_budget=search_budget,
+        search=search,
         eval_worlds=eval_worlds,
         repeats=setup.repeats,
         config=config,

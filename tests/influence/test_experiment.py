@@ -192,6 +192,31 @@ def test_harvest_with_a_search_for_more_worlds_and_figure_8(tmp_path, harvest_ge
         assert image.size[0] > image.size[1] > 100
 
 
+def test_an_atlas_search_collects_distinct_worlds_with_the_property(tmp_path, racing_generator):
+    result = influence(
+        tmp_path,
+        racing_setup(racing_generator),
+        SELECT,
+        algo="ppo",
+        episodes=8,
+        seeds=(0,),
+        candidates=24,
+        search_budget=105,  # the 10 x 10 grid needs at least 100
+        search="atlas",
+        eval_worlds=4,
+        config=TINY_PPO,
+        progress=False,
+    )
+    assert result["worlds"]["tried"] == 24 + 105 and result["config"]["search"] == "atlas"
+    with RunStore(tmp_path, create=False) as store:
+        campaign = store.campaign("influence-search")
+        assert campaign.optimiser == "cma-me" and campaign.config["atlas"]["grid"]["descriptors"] == ["total_curvature", "sharpest_corner"]
+    worlds, _, _ = load_influenced_worlds(tmp_path, "racing")
+    assert len(np.unique(np.asarray(worlds.road).reshape(len(worlds.road), -1), axis=0)) == result["worlds"]["selected"]  # distinct
+    with pytest.raises(WorldagentError, match="unknown search 'grid'; use one of: cmaes, atlas"):
+        influence(tmp_path / "b", racing_setup(racing_generator), SELECT, episodes=8, search="grid")
+
+
 def test_racing_figure_from_the_returned_result(racing_run, tmp_path):
     run_dir, result = racing_run
     worlds, _, values = load_influenced_worlds(run_dir, "racing")

@@ -70,6 +70,7 @@ def influence_command(
     greedy: bool,
     quiet: bool,
     stochastic: bool = False,
+    search: str = "cmaes",
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.influence.selection import parse_selection
@@ -94,6 +95,7 @@ def influence_command(
         seeds=tuple(range(seeds)),
         candidates=candidates,
         search_budget=search_budget,
+        search=search,
         eval_worlds=eval_worlds,
         seed=seed,
         greedy=greedy,
@@ -123,8 +125,9 @@ def register(app: typer.Typer) -> None:
         episodes: int = typer.Option(None, "--episodes", help="Training episodes per agent (default: the algorithm's budget for the env)."),
         seeds: int = typer.Option(3, "--seeds", help="Training seeds 0..N-1: one default and one influenced agent each."),
         candidates: int = typer.Option(500, "--candidates", help="Random G(z) worlds evaluated with --agent to find the property."),
-        search_budget: int = typer.Option(
-            0, "--search-budget", help="Extra worlds a CMA-ES search evaluates, pushing toward the property (0: none)."
+        search_budget: int = typer.Option(0, "--search-budget", help="Extra worlds a search evaluates, pushing toward the property (0: none)."),
+        search: str = typer.Option(
+            "cmaes", "--search", help="cmaes (the paper's) or atlas (CMA-ME over the env's descriptors: many distinct worlds with the property)."
         ),
         eval_worlds: int = typer.Option(200, "--eval-worlds", help="Random G(z) worlds every trained agent is evaluated on (the same for all)."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
@@ -154,4 +157,5 @@ def register(app: typer.Typer) -> None:
             greedy,
             quiet,
             stochastic,
+            search,
         )

@@ -49,14 +49,19 @@ def compared_metrics(spec) -> tuple[str, ...]:
     return tuple(spec.metrics.compared) or (spec.metrics.main,)
 
 
-def evaluate_campaign(store, campaign, objective, env, policy, G, params, repeats: int, keep_worlds: bool, progress: bool) -> list:
-    """Run (or resume) one campaign of ``policy`` on G(z) worlds; returns its evaluations."""
+SEARCHES = ("cmaes", "atlas")  # how step (b) searches: CMA-ES (the paper's optimiser) or a CMA-ME atlas (distinct worlds)
+
+
+def evaluate_campaign(
+    store, campaign, objective, env, policy, G, params, repeats: int, keep_worlds: bool, progress: bool, optimiser: Any = None
+) -> list:
+    """Run (or resume) one campaign of ``policy`` on G(z) worlds (``optimiser``: a prebuilt one); returns its evaluations."""
     from worldagent.search.campaign import run_campaign
     from worldagent.search.objectives import LatentObjective
 
     evaluate = LatentObjective(objective, env, policy, G, repeats, params, keep_worlds=keep_worlds)
     campaign = dataclasses.replace(campaign, agent=agent_record(policy))
-    return run_campaign(store, campaign, evaluate, resume=True, progress=progress)
+    return run_campaign(store, campaign, evaluate, resume=True, progress=progress, optimiser=optimiser)
 
 
 def train_agent(
@@ -158,8 +163,15 @@ def find_worlds(store, spec, env, params, policy, G, selection: Selection, count
     if counts["search_budget"] > 0:
         clock = time.perf_counter()
         maximize = search_direction(selection, selection.world_means(tried)[metric])
-        search_spec = CampaignSpec(SEARCH, spec.name, metric, maximize, "cmaes", counts["search_budget"], seed, G.latent_dim)
-        tried = tried + evaluate_campaign(store, search_spec, Objective(spec.name, metric, maximize), env, policy, G, params, repeats, True, progress)
+        optimiser, extra, name = None, None, "cmaes"
+        if counts.get("search") == "atlas":  # the best world of every cell: many distinct worlds with the property, not one corner
+            from worldagent.search.atlas import atlas_optimiser
+
+            optimiser, extra = atlas_optimiser(spec, G, maximize, seed, counts["search_budget"])
+            name = optimiser.name
+        search_spec = CampaignSpec(SEARCH, spec.name, metric, maximize, name, counts["search_budget"], seed, G.latent_dim, extra=extra)
+        objective = Objective(spec.name, metric, maximize)
+        tried = tried + evaluate_campaign(store, search_spec, objective, env, policy, G, params, repeats, True, progress, optimiser)
         campaigns.append(SEARCH)
         timings["search"] = time.perf_counter() - clock
     worlds, latents, values = select_worlds(store, campaigns, selection, spec)
@@ -198,6 +210,7 @@ def influence(
     seeds: Sequence[int] = (0, 1, 2),
     candidates: int = 500,
     search_budget: int = 0,
+    search: str = "cmaes",
     eval_worlds: int = 200,
     repeats: int = 8,
     config: Any = None,
@@ -224,6 +237,9 @@ def influence(
         candidates: random G(z) worlds evaluated with ``policy`` (step a).
         search_budget: worlds a CMA-ES search evaluates on top, pushing the selection's first
             metric toward the property (the paper's second iteration, §4.1); 0: none.
+        search: "cmaes" (the paper's optimiser; it tends to revisit one world) or "atlas" (CMA-ME
+            over the spec's default descriptors: the most extreme world of every cell, so the
+            selected worlds are many distinct ones).
         eval_worlds: random G(z) worlds every trained agent is evaluated on (the same for all).
         repeats: episodes per world, for candidates and evaluation (the paper: 8).
         config: base training config (default the algorithm's, with the env's overrides); its
@@ -243,12 +259,15 @@ def influence(
     algo = _check_algorithm(spec, algo)
     seeds = [int(s) for s in seeds]
     _check_counts(seeds, episodes, candidates, search_budget, eval_worlds, repeats)
+    if search not in SEARCHES:
+        raise WorldagentError(f"unknown search {search!r}; use one of: {', '.join(SEARCHES)}.")
     if G.env != spec.name:
         raise WorldagentError(f"the generator makes {G.env} worlds, not {spec.name} worlds; pass a {spec.name} generator.")
     config = training_config(spec, algo, episodes, base=config)
     counts = {
         "candidates": int(candidates),
         "search_budget": int(search_budget),
+        **({"search": search} if search != "cmaes" else {}),  # absent for CMA-ES: plans made before the option still match
         "eval_worlds": int(eval_worlds),
         "repeats": int(repeats),
         "seed": int(seed),

@@ -156,6 +156,19 @@ class QDOptimiser(Optimiser):
         self.scheduler.tell(-self._minimised(scores), self.describe(z))  # pyribs maximises
 
 
+def atlas_optimiser(
+    spec: Any, generator: Any, maximize: bool, seed: int, budget: int, descriptors: Sequence[str] | None = None, cells: int = 10
+) -> tuple[QDOptimiser, dict]:
+    """A CMA-ME optimiser over a grid of ``spec``'s descriptors (default: the spec's), and what its
+    campaign records (``CampaignSpec.extra``: the grid and the emitters' settings); bad input is refused in one line."""
+    names, shape = check_descriptors(spec, descriptors, cells, budget)
+    describe = describer(spec, generator, names)
+    grid = Grid(names, shape, grid_ranges(describe, generator.latent_dim, names, seed))
+    config = QDConfig()
+    optimiser = QDOptimiser(generator.latent_dim, maximize, seed, grid, describe, config)
+    return optimiser, {"atlas": {"grid": grid.record(), **asdict(config)}}
+
+
 @dataclass(frozen=True)
 class Archive:
     """Evaluations placed on a grid: the best world of each cell.

@@ -14,9 +14,11 @@ from PIL import Image
 from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.policy import Policy
 from worldagent.agents.ppo import PPOConfig
+from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.experiments import example_worlds, influence, setup
 from worldagent.influence import load_influenced_worlds
+from worldagent.influence.experiment import training_failures
 from worldagent.influence.statistics import mean_and_ci
 from worldagent.influence.worlds import example_indices
 from worldagent.reports.influence import influence_figure
@@ -190,6 +192,16 @@ def test_harvest_with_a_search_for_more_worlds_and_figure_8(tmp_path, harvest_ge
     figure = influence_figure(json.loads((tmp_path / "influence.json").read_text()), examples, "harvest", tmp_path / "figure.png")
     with Image.open(figure) as image:
         assert image.size[0] > image.size[1] > 100
+
+
+def test_agents_that_failed_to_learn_are_warned_of_and_recorded(racing_run, racing_generator):
+    run_dir, result = racing_run  # agents of 8 training episodes never lap
+    assert set(result["failed_training"]) == {"default-s0", "default-s1", "influenced-s0", "influenced-s1"}
+    assert "laps in only 0% of its episodes" in result["failed_training"]["influenced-s1"]
+    with pytest.warns(UserWarning, match="the influenced-s1 agent laps in only 0%"):
+        run_racing(run_dir, racing_generator)  # a rerun (nothing new trained) says it again
+    assert training_failures(registry.get("racing"), {"default": {"0": {"lap_completed": 0.93}}}) == {}
+    assert training_failures(registry.get("harvest"), {"default": {"0": {"conflict": 0.0}}}) == {}  # harvest has no check
 
 
 def test_an_atlas_search_collects_distinct_worlds_with_the_property(tmp_path, racing_generator):

@@ -198,3 +198,11 @@ def test_the_failure_atlas_section_is_recomputed_from_the_store(racing_run):
     assert shown["racing.failure.mc.low"] <= shown["racing.failure.mc.estimate"] <= shown["racing.failure.mc.high"]
     assert shown["racing.failure.is.episodes"] == 2 * shown["racing.failure.is.worlds"] > 0
     assert "Failure groups" in page and "How likely is" in page
+
+
+def test_agents_that_failed_to_learn_are_flagged_in_the_report(racing_run):
+    out, _ = racing_run  # the tiny preset's agents train 64 episodes: they never lap
+    page = (out / "report.html").read_text()
+    flags = re.findall(r"data-flag='failed-training'>Warning: the (\S+) agent", page)
+    assert flags == ["default-s0", "influenced-s0"]
+    assert "WARNING: the influenced-s0 agent laps in only" in Manifest.read(out).data["phases"]["racing/influence"]["outputs"]["summary"]

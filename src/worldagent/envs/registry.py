@@ -154,6 +154,9 @@ class EnvSpec:
         presets: ``preset name -> {budget field: value}``: the budgets of ``worldagent reproduce``.
         reproduce_options: the ``make`` options ``worldagent reproduce`` uses (harvest: tagger 0).
         selection: the paper's influencing selection (``"crash_rate > 0.5"``).
+        training_check: ``{metric: mean over evaluated worlds} -> ""`` when a trained agent
+            behaves as one that learnt, else a few words on how it failed (racing: it never laps,
+            i.e. it parks or crashes); influencing warns and the report flags such an agent.
         failure: the event that counts as a failure by default (the selection grammar): the
             failing threshold of ``worldagent atlas`` and the event of ``failure-rate`` in
             ``worldagent reproduce`` ("" where the env names none).
@@ -182,6 +185,7 @@ class EnvSpec:
     reproduce_options: Mapping[str, Any] = field(default_factory=dict)
     selection: str = ""
     failure: str = ""
+    training_check: Callable[[Mapping[str, float]], str] | None = None
     paper: Mapping[str, float] = field(default_factory=dict)
     episode_note: Callable[[dict], str] | None = None
     raw_decode: Callable[[Any], Any] | None = None

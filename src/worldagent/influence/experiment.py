@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -195,6 +196,14 @@ def compare_agents(store, spec, env, params, G, policies: dict, counts: dict, pr
     return per_seed
 
 
+def training_failures(spec, per_seed: dict) -> dict[str, str]:
+    """{"influenced-s2": why} for every trained agent ``spec.training_check`` says did not learn."""
+    if spec.training_check is None:
+        return {}
+    found = {f"{label}-s{seed}": spec.training_check(means) for label, by_seed in per_seed.items() for seed, means in by_seed.items()}
+    return {name: why for name, why in found.items() if why}
+
+
 def influence(
     run_dir: str | Path,
     spec,
@@ -301,6 +310,9 @@ def influence(
         timings["evaluate"] = time.perf_counter() - clock
     timings["total"] = time.perf_counter() - started
     compared = compared_metrics(spec)
+    failed = training_failures(spec, per_seed)
+    for name, why in failed.items():  # a failed run skews the comparison: say so where the user looks
+        warnings.warn(f"influence: the {name} agent {why}; its seed weighs on the means and intervals.", stacklevel=2)
     result = {
         "env": spec.name,
         "algo": algo,
@@ -315,6 +327,7 @@ def influence(
         "metrics": list(compared),
         "per_seed": per_seed,
         "summary": summarise(per_seed, compared),
+        "failed_training": failed,
         "agents": {name: {**record, "dir": str(Path("agents") / name)} for name, record in agents.items()},
         "wall_seconds": rounded(timings),
         "files": {"store": "store.sqlite", "worlds": WORLDS_FILE, "plan": PLAN_FILE},

@@ -232,8 +232,12 @@ def influence_section(run_dir: Path, results: dict) -> str:
                     for label in ("default", "influenced")
                 ]
             )
+        failed = "".join(
+            f"<p class='error' data-flag='failed-training'>Warning: the {esc(name)} agent {esc(why)}; its seed weighs on the means and intervals.</p>"
+            for name, why in result.get("failed_training", {}).items()
+        )
         return (
-            f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
+            failed + f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
             f"became the influenced training distribution; agents trained with seeds {esc(result['config']['seeds'])}, "
             f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
             + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)

@@ -339,6 +339,7 @@ def influence_summary(result: dict) -> str:
     parts = [f"{result.get('worlds', {}).get('selected', '?')} worlds selected"]
     for metric, by_label in summary.items():
         parts.append(f"{metric} {by_label['default']['mean']:.3g} -> {by_label['influenced']['mean']:.3g}")
+    parts += [f"WARNING: the {name} agent {why}" for name, why in result.get("failed_training", {}).items()]
     return "; ".join(parts)
 
 

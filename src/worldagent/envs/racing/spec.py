@@ -135,6 +135,13 @@ def episode_note(metrics: dict) -> str:
     return f", {int(crashed.sum())}/{len(crashed)} episodes crashed" if len(crashed) else ""
 
 
+def training_check(means) -> str:
+    """Why a trained racing agent failed to learn ("" if it laps): one that laps in under half its
+    episodes mostly parks or crashes (a failed training run, not a property of the worlds)."""
+    laps = means.get("lap_completed")
+    return f"laps in only {laps:.0%} of its episodes (it parks or crashes)" if laps is not None and laps < 0.5 else ""
+
+
 def _budgets(**values):
     return values
 
@@ -239,5 +246,6 @@ SPEC = register(
             "influence.reward_change_pct": -5.0,
         },
         episode_note=episode_note,
+        training_check=training_check,
     )
 )

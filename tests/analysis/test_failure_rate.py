@@ -54,7 +54,7 @@ def test_clopper_pearson_textbook_values_and_symmetry():
 
 @pytest.mark.parametrize(
     "proposal",
-    [fr.Proposal.shift(np.array([3.0, -1.0])), fr.Proposal(np.array([[3.0, -1.0], [-2.5, 0.5]]), np.array([0.7, 0.3]), scale=0.8)],
+    [fr.Proposal.shift(np.array([3.0, -1.0])), fr.Proposal(np.array([[3.0, -1.0], [-2.5, 0.5]]), np.array([0.7, 0.3]), np.array([0.7, 1.0]))],
 )
 def test_weights_are_bounded_by_the_prior_share_and_ess_counts_equal_weights(proposal):
     z = fr.sample_mixture(np.random.default_rng(0), proposal, 0.2, 20_000)
@@ -102,7 +102,7 @@ def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_
 
 def test_importance_sampling_learns_the_prior_mean_on_the_event():
     spend = fr._Spender(toy, 0)
-    proposal, best = fr.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig())
+    proposal, best, hits = fr.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig())
     conditional_mean = NormalDist().pdf(THRESHOLD) / P_TOY  # E[z0 | z0 > 3] = 3.28
     mean = proposal.shares @ proposal.centres  # one region: BIC may split it, but the mixture's mean stays there
     assert mean[0] == pytest.approx(conditional_mean, abs=0.3) and np.all(np.abs(mean[1:]) < 0.4)
@@ -119,8 +119,8 @@ P_TWO = 2 * (1 - NormalDist().cdf(3.2))
 
 def test_a_mixture_covers_two_regions_where_a_single_mean_shift_fails():
     single = fr.ImportanceConfig(components=1)
-    shift, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, single)
-    mixture, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, fr.ImportanceConfig())
+    shift, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, single)
+    mixture, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, fr.ImportanceConfig())
     assert len(shift.shares) == 1 and abs(shift.centres[0, 0]) > 2.5  # one side only: the other is left to the prior
     assert sorted(np.sign(mixture.centres[:, 0])) == [-1, 1] and np.all(np.abs(mixture.centres[:, 0]) > 2.5)
     assert np.all(mixture.shares > 0.25)
@@ -176,7 +176,7 @@ def test_a_rerun_replays_the_store_and_evaluates_nothing(tmp_path):
         (lambda: fr.monte_carlo(toy, 10, 100, target_width=0), "positive relative half-width"),
         (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(round_worlds=10)), "fewer than 2 elites"),
         (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(prior_weight=1.5)), "prior_weight=1.5"),
-        (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(scale=1.5)), "scale=1.5"),
+        (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(bandwidth=1.5)), "bandwidth=1.5"),
         (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(components=0)), "components=0"),
         (lambda: fr.clopper_pearson(5, 3), "0 <= k <= n"),
         (lambda: fr.methods("bootstrap"), "use mc, is or both"),

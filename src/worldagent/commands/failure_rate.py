@@ -53,6 +53,7 @@ def register(app: typer.Typer) -> None:
         width: float = typer.Option(None, "--width", help="Stop sampling once the 95% interval is within ±WIDTH of the estimate (0.5: ±50%)."),
         round_worlds: int = typer.Option(500, "--round-worlds", help="Importance sampling: worlds per round of the search for the proposal."),
         rounds: int = typer.Option(10, "--rounds", help="Importance sampling: rounds of the search at most."),
+        components: int = typer.Option(8, "--components", help="Importance sampling: shifted priors in the proposal at most (1: one mean shift)."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         seed: int = typer.Option(0, "--seed", help="Seed of the latents and episodes."),
         out: Path = typer.Option(Path("runs/failure-rate"), "--out", help="Run directory (store.sqlite); a rerun resumes."),
@@ -69,8 +70,8 @@ def register(app: typer.Typer) -> None:
         from worldagent.influence.selection import parse_selection
         from worldagent.store import RunStore
 
-        check_counts(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds)
-        importance = ImportanceConfig(round_worlds=round_worlds, max_rounds=rounds)
+        check_counts(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components)
+        importance = ImportanceConfig(round_worlds=round_worlds, max_rounds=rounds, components=components)
         methods(method)
         check_budget(worlds, width, importance)
         parse_selection(event, env)  # a bad event fails before the agent and generator load

@@ -8,23 +8,35 @@ closed-form toy (event ``z[0] > 3``) tests them without any environment:
 - ``monte_carlo``: z ~ N(0, I); k of n worlds in the event; P = k / n with the exact binomial
   (Clopper–Pearson) interval. Honest at any P, but a rare event needs ~ 4 / (P r²) worlds for a
   95% interval of ±r·P.
-- ``importance_sampling``: the cross-entropy method (Rubinstein & Kroese) learns a proposal g, a
-  mixture of shifted priors Σ_k π_k N(c_k, s² I) (s = 1 by default). Each round samples worlds,
-  ranks them by the event's *margin* (how far past its thresholds a world is; > 0 inside), lowers
-  the bar to the top ``elite_fraction`` (never past the event itself), and fits g to the elites
-  weighted by p/q: the cross-entropy update in this family is weighted EM, run for 1 to
-  ``components`` components and kept at the lowest BIC. Then worlds are sampled from the
-  defensive mixture q = α N(0, I) + (1 − α) g, which keeps every weight w = p/q ≤ 1/α, and
-  P = mean(w · 1[event]). The worlds of the search are spent, counted, and not reused.
+- ``importance_sampling``: two stages.
+
+  1. *Search*: the cross-entropy method (Rubinstein & Kroese) learns a mixture of shifted priors
+     Σ_k π_k N(c_k, I). Each round samples worlds, ranks them by the event's *margin* (how far
+     past its thresholds a world is; > 0 inside), lowers the bar to the top ``elite_fraction``
+     (never past the event itself), and fits the mixture to the elites weighted by p/q: the
+     cross-entropy update in this family is weighted EM, run for 1 to ``components``
+     components and kept at the lowest BIC.
+  2. *Sampling*, in batches from the defensive mixture q = α N(0, I) + (1 − α) g, which keeps
+     every weight w = p/q ≤ 1/α; P = mean(w · 1[event]) over all batches. Before each batch, g
+     is refitted: ``wide_share`` of the search's mixture plus N(z_i, h² I) kernels (h =
+     ``bandwidth``) around every event world z_i found so far, shares ∝ its weight: a kernel
+     estimate of the prior on the event that grows as regions are found. Each batch is unbiased
+     given the ones before, so the mean is unbiased; its interval treats the terms as
+     independent. The search's worlds are spent, counted, and not in the mean.
 
   Why a mixture: an event is often several regions far apart in latent space (distinct tracks
-  or maps). A single mean shift then moves toward one of them, or toward their average where
-  none lies, and leaves the others to the prior's share α: on the toy |z0| > 3.2 its interval
-  covered P in 9 of 20 seeds, the mixture's in 20 of 20 (``tests``). Why identity covariances:
-  fitting scales narrows g in a few rounds of a few hundred worlds to less than the event's
-  extent (its tails are never sampled), and a narrower component in the latent directions the
-  event ignores makes log-weights vary like a sum of as many χ² terms; on the toy z0 > 3 a fitted
-  diagonal scale covered 1 − Φ(3) in ~55% of 40 seeds against 97% for the shifted prior.
+  or maps). A single mean shift moves toward one of them, or toward their average where none
+  lies, and leaves the others to the prior's share α: on the toy |z0| > 3.2 its interval covered
+  P in 9 of 20 seeds, the mixture's in 20 of 20 (``tests``). Why kernels after the search: a
+  generator that repairs to its dataset's worlds makes the event a union of small cells (one per
+  track, per-coordinate spread ~0.5), where a shifted prior of scale 1 puts a few percent of its
+  draws; kernels of bandwidth 0.7 around the hits put most of them there (racing, p ≈ 1e-4: 7-15x
+  fewer worlds than Monte Carlo instead of 3-4x; benchmarks/results/failure-rate.json,
+  docs/failure-rate.md). Why not narrower, or fitted, scales: in 10 dimensions a component
+  narrower than the event's extent makes log-weights vary like a χ² sum over the coordinates;
+  components with fitted scales (floor 0.3-0.5) locked onto one or two cells and their intervals
+  missed P by 2-20x; a fitted diagonal scale covered 1 − Φ(3) on the toy z0 > 3 in ~55% of 40
+  seeds against 97% for the shifted prior.
 
 The estimator's g-th call of ``evaluate`` is generation g, its worlds played with
 ``evaluation_seed(seed, g, slot)`` as in a campaign. ``StoredEvaluate`` makes ``evaluate`` from

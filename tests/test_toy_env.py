@@ -108,3 +108,5 @@ def test_reproduce_tiny_has_a_toy_report_section(toy, tmp_path):
     assert numbers, "the report has no toy numbers"
     assert math.isfinite(numbers[f"{toy.name}.random.mean_raw"])
     assert 0.0 <= numbers[f"{toy.name}.random.mean_normalised"] <= 1.0
+    atlas = re.search(r'<section id="atlas">(.*?)</section>', html, re.S).group(1)
+    assert "skipped: the preset&#x27;s atlas_budget is 0" in atlas  # no atlas budget: the phase says so

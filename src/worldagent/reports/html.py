@@ -255,6 +255,8 @@ def atlas_section(run_dir: Path, results: dict) -> str:
         outputs = res["phases"]["atlas"].get("outputs", {})
         if "skipped" in outputs:
             return missing(f"skipped: {outputs['skipped']}")
+        if "atlas" not in res:
+            return missing("no atlas campaign in the store")
         found = res["atlas"]
         grid, key = found["atlas"].grid, f"{env}.atlas"
         rows = [
@@ -277,7 +279,7 @@ def atlas_section(run_dir: Path, results: dict) -> str:
             + body
         )
 
-    return per_env(results, "atlas", render, "atlas", "no atlas campaign in the store")
+    return per_env(results, "atlas", render)
 
 
 def probability_table(env: str, found: dict, config: dict) -> str:

@@ -27,11 +27,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from machine import RESULTS, describe_machine, record  # noqa: E402
-from worldagent.agents.algorithms import training_config  # noqa: E402
+from worldagent.agents.algorithms import get_algorithm, training_config  # noqa: E402
 from worldagent.agents.distributions import LatentWorlds, world_distribution  # noqa: E402
+from worldagent.agents.policy import network_policy  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.envs.core import rollout  # noqa: E402
@@ -40,7 +42,7 @@ from worldagent.envs.racing.metrics import racing_return_bounds  # noqa: E402
 GENERATOR_DIR = Path("runs/generators/racing")
 SPEC = registry.get("racing")
 LAP_TARGET = 0.9
-KEY_FIELDS = ("algorithm", "observation", "options", "overrides", "seed", "episodes_budget", "eval_worlds", "repeats", "eval_source")
+KEY_FIELDS = ("algorithm", "observation", "options", "overrides", "note", "seed", "episodes_budget", "eval_worlds", "repeats", "eval_source")
 
 
 def evaluate(policy, worlds, repeats: int, key, env, params) -> dict[str, np.ndarray]:
@@ -68,12 +70,48 @@ def evaluation_worlds(key, n: int):
     return pool.worlds, f"procedural tracks, seeds 1,000,000..{1_000_000 + n - 1} (no generator at {GENERATOR_DIR})"
 
 
-def run_one(algo: str, options: dict, seed: int, args, pool, out_root: Path) -> dict:
-    """Train one agent and evaluate it; the result row."""
+def result_row(algo, options, overrides, config, seed, args, trained: dict, policy, env, params, eval_key) -> dict:
+    """Evaluate ``policy`` on the evaluation worlds; the run's row (``trained``: its training figures)."""
+    start = time.perf_counter()
+    key_worlds, key_eval = jax.random.split(eval_key)
+    worlds, source = evaluation_worlds(key_worlds, args.eval_worlds)
+    metrics = evaluate(policy, worlds, args.repeats, key_eval, env, params)
+    raw = metrics["return"]
+    parked = (metrics["steps"] >= int(params.max_steps)) & ~metrics["crashed"] & ~metrics["lap_completed"]
+    low, high = racing_return_bounds(params)
+    return {
+        "algorithm": algo,
+        "observation": options["observation"],
+        "options": options,
+        "overrides": overrides,
+        "note": args.note,
+        "seed": seed,
+        "episodes_budget": args.episodes,
+        "eval_worlds": args.eval_worlds,
+        "repeats": args.repeats,
+        "eval_source": source,
+        "config": config.to_dict(),
+        **trained,
+        "lap_rate": round(float(metrics["lap_completed"].mean()), 4),
+        "crash_rate": round(float(metrics["crashed"].mean()), 4),
+        "parked_rate": round(float(parked.mean()), 4),
+        "mean_return_raw": round(float(raw.mean()), 2),
+        "mean_return_normalised": round(float(SPEC.metrics.normalise(raw, params).mean()), 4),
+        "normalisation": f"clip((raw - {low}) / ({high} - {low}), 0, 1)",
+        "mean_steps": round(float(metrics["steps"].mean()), 1),
+        "eval_seconds": round(time.perf_counter() - start, 1),
+        "policy": "stochastic (samples its action distribution)",
+    }
+
+
+def run_one(algo: str, options: dict, seed: int, args, pool, out_root: Path) -> list[dict]:
+    """Train one agent with the host driver (checkpoints, resumable) and evaluate it; its row."""
     env, params = SPEC.make_env(options)
     overrides = args.overrides.get(algo, {})
     config = training_config(SPEC, algo, episodes=args.episodes, **overrides)
-    tag = "-".join(f"{k}={v}" for k, v in sorted({**options, **overrides}.items()))
+    tag = "-".join(f"{k}={v}" for k, v in sorted({**options, **overrides}.items())) + "".join(
+        c if c.isalnum() else "_" for c in f"-{args.note}" if args.note
+    )
     result = train(
         SPEC,
         algo,
@@ -86,48 +124,62 @@ def run_one(algo: str, options: dict, seed: int, args, pool, out_root: Path) -> 
         resume=not args.no_resume,
         distribution_spec="generator (procedural pool of 10,000, seeds 0..9999)",
     )
-    start = time.perf_counter()
-    key_worlds, key_eval = jax.random.split(jax.random.key(args.eval_seed))
-    worlds, source = evaluation_worlds(key_worlds, args.eval_worlds)
-    metrics = evaluate(result.agent.policy, worlds, args.repeats, key_eval, env, params)
-    eval_seconds = time.perf_counter() - start
-    raw = metrics["return"]
-    parked = (metrics["steps"] >= int(params.max_steps)) & ~metrics["crashed"] & ~metrics["lap_completed"]
-    low, high = racing_return_bounds(params)
-    return {
-        "algorithm": algo,
-        "observation": options["observation"],
-        "options": options,
-        "overrides": overrides,
-        "seed": seed,
-        "episodes_budget": args.episodes,
-        "eval_worlds": args.eval_worlds,
-        "repeats": args.repeats,
-        "eval_source": source,
-        "config": config.to_dict(),
+    trained = {
+        "training": "host driver (training.train), one seed",
         "train_seconds": round(result.wall_seconds, 1),
         "resumed_from_update": result.resumed_from_update,
         "episodes": result.episodes,
         "env_steps": result.env_steps,
         "env_steps_per_s": round(result.env_steps / result.wall_seconds),
-        "lap_rate": round(float(metrics["lap_completed"].mean()), 4),
-        "crash_rate": round(float(metrics["crashed"].mean()), 4),
-        "parked_rate": round(float(parked.mean()), 4),
-        "mean_return_raw": round(float(raw.mean()), 2),
-        "mean_return_normalised": round(float(SPEC.metrics.normalise(raw, params).mean()), 4),
-        "normalisation": f"clip((raw - {low}) / ({high} - {low}), 0, 1)",
-        "mean_steps": round(float(metrics["steps"].mean()), 1),
-        "eval_seconds": round(eval_seconds, 1),
-        "policy": "stochastic (samples its action distribution)",
         "final_curve": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
     }
+    return [result_row(algo, options, overrides, config, seed, args, trained, result.agent.policy, env, params, jax.random.key(args.eval_seed))]
+
+
+def run_vmapped(algo: str, options: dict, seeds: list[int], args, pool) -> list[dict]:
+    """Train every seed at once (``jax.vmap(trainer.train)``, one jitted call, no checkpoints) and evaluate each; their rows.
+
+    Each row's ``train_seconds`` is the whole call's wall time divided by the number of seeds."""
+    env, params = SPEC.make_env(options)
+    overrides = args.overrides.get(algo, {})
+    config = training_config(SPEC, algo, episodes=args.episodes, **overrides)
+    trainer = get_algorithm(algo).make_train(config, env, params, pool)  # it sets respawn
+    start = time.perf_counter()
+    states, curves = jax.block_until_ready(jax.jit(jax.vmap(trainer.train))(jax.vmap(jax.random.key)(jnp.asarray(seeds))))
+    wall = time.perf_counter() - start
+    rows = []
+    for i, seed in enumerate(seeds):
+        state = jax.tree_util.tree_map(lambda x: x[i], states)
+        active = np.asarray(curves["active"][i]) > 0
+        trained = {
+            "training": f"jax.vmap(trainer.train) over seeds {seeds}, one jitted call; train_seconds = its wall time / {len(seeds)}",
+            "train_seconds": round(wall / len(seeds), 1),
+            "resumed_from_update": None,
+            "episodes": int(state.episodes),
+            "env_steps": int(state.env_steps),
+            "env_steps_per_s": round(int(state.env_steps) * len(seeds) / wall),
+            "final_curve": {k: float(np.asarray(v[i])[active][-1]) for k, v in curves.items() if active.any()},
+        }
+        policy = network_policy(trainer.network, state.params, get_algorithm(algo).network_kind)
+        rows.append(result_row(algo, options, overrides, config, seed, args, trained, policy, env, params, jax.random.key(args.eval_seed)))
+    return rows
 
 
 def summarise(runs: list[dict]) -> list[dict]:
     """Per algorithm × observation × options × budget: seeds, how many lap at ``LAP_TARGET``, means."""
     groups: dict[str, list[dict]] = {}
     for run in runs:
-        key = json.dumps([run["algorithm"], run["options"], run.get("overrides", {}), run["episodes_budget"], run["eval_worlds"], run["repeats"]])
+        key = json.dumps(
+            [
+                run["algorithm"],
+                run["options"],
+                run.get("overrides", {}),
+                run.get("note", ""),
+                run["episodes_budget"],
+                run["eval_worlds"],
+                run["repeats"],
+            ]
+        )
         groups.setdefault(key, []).append(run)
     table = []
     for group in groups.values():
@@ -138,6 +190,7 @@ def summarise(runs: list[dict]) -> list[dict]:
                 "algorithm": first["algorithm"],
                 "options": first["options"],
                 "overrides": first.get("overrides", {}),
+                "note": first.get("note", ""),
                 "episodes_budget": first["episodes_budget"],
                 "eval": f"{first['eval_worlds']} worlds x {first['repeats']}",
                 "seeds": sorted(r["seed"] for r in group),
@@ -172,6 +225,7 @@ def main() -> None:
     parser.add_argument("--option", action="append", default=[], help="another racing option NAME=VALUE, e.g. reach=96")
     parser.add_argument("--set", action="append", default=[], help="a config field ALGO.FIELD=JSON, e.g. ppo.crash_warmup=0.3")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--note", default="", help="what distinguishes these runs beyond options and config (kept in each row)")
     parser.add_argument("--episodes", type=int, default=10_000)
     parser.add_argument("--eval-worlds", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=8)
@@ -179,6 +233,7 @@ def main() -> None:
     parser.add_argument("--name", default="train-racing", help="results file: benchmarks/results/NAME-<backend>.json")
     parser.add_argument("--out-root", type=Path, default=Path("runs/agents/train-racing"))
     parser.add_argument("--no-resume", action="store_true")
+    parser.add_argument("--vmap-seeds", action="store_true", help="train all seeds in one vmapped jitted call (faster on CPU; no checkpoints)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args()
     args.overrides = parse_overrides(args.set)
@@ -189,17 +244,23 @@ def main() -> None:
     for observation in args.observations:
         options = SPEC.parse_options([f"observation={observation}", *args.option])
         for algo in args.algos:
-            for seed in args.seeds:
-                run = run_one(algo, options, seed, args, pool, args.out_root)
-                print(
-                    f"{algo} {observation} {options} seed {seed}: {run['episodes']:,} episodes, {run['env_steps']:,} steps in "
-                    f"{run['train_seconds']:.0f} s; eval {args.eval_worlds} x {args.repeats}: lap {run['lap_rate']:.3f}, "
-                    f"crash {run['crash_rate']:.3f}, parked {run['parked_rate']:.3f}, normalised {run['mean_return_normalised']:.3f}",
-                    flush=True,
-                )
-                key = [run[f] for f in KEY_FIELDS]
-                runs = [r for r in previous_runs(args.name) if [r.get(f) for f in KEY_FIELDS] != key] + [run]  # reread: runs in parallel add theirs
-                path = record(args.name, {"lap_target": LAP_TARGET, "summary": summarise(runs), "runs": runs})
+            if args.vmap_seeds:
+                batches = [run_vmapped(algo, options, args.seeds, args, pool)]
+            else:
+                batches = (run_one(algo, options, seed, args, pool, args.out_root) for seed in args.seeds)
+            for batch in batches:
+                for run in batch:
+                    print(
+                        f"{algo} {observation} {options} {args.overrides.get(algo, {})} seed {run['seed']}: {run['episodes']:,} episodes, "
+                        f"{run['env_steps']:,} steps, {run['train_seconds']:.0f} s; eval {args.eval_worlds} x {args.repeats}: lap {run['lap_rate']:.3f}, "
+                        f"crash {run['crash_rate']:.3f}, parked {run['parked_rate']:.3f}, normalised {run['mean_return_normalised']:.3f}",
+                        flush=True,
+                    )
+                    key = [run[f] for f in KEY_FIELDS]
+                    runs = [r for r in previous_runs(args.name) if [r.get(f) for f in KEY_FIELDS] != key] + [
+                        run
+                    ]  # reread: runs in parallel add theirs
+                    path = record(args.name, {"lap_target": LAP_TARGET, "summary": summarise(runs), "runs": runs})
     print(f"recorded in {path}")
 
 

@@ -90,6 +90,7 @@ class ACKTRConfig(JsonConfig):
     activation: str = "tanh"
     respawn: bool = True
     crash_warmup: float = 0.0
+    quadratic: bool = False
 
     def __post_init__(self):
         for name in ("total_episodes", "num_envs", "num_steps", "inverse_every"):
@@ -144,7 +145,7 @@ def make_train(config: ACKTRConfig, env, env_params, distribution) -> Trainer:
 def _core(config: ACKTRConfig, env):
     """``init(key, consts)``, ``update(state, consts)`` and the network; consts = (env_params, distribution).
     Cached, so trainers of the same config and env share their compilation."""
-    network = ActorCritic(env.num_actions, config.hidden, config.activation)
+    network = ActorCritic(env.num_actions, config.hidden, config.activation, config.quadratic)
     kfac = KFAC(config.kfac_config(), network.apply)
     batch = config.num_envs * config.num_steps
     example_obs = jnp.zeros((batch, *env.observation_shape), jnp.float32)

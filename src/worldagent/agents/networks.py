@@ -47,6 +47,17 @@ class MLP(nn.Module):
         return nn.Dense(self.out, kernel_init=nn.initializers.orthogonal(self.head_scale), bias_init=nn.initializers.zeros)(x)
 
 
+def quadratic_features(x: jax.Array) -> jax.Array:
+    """f32[..., D + D(D+1)/2]: ``x`` and the products ``x_i x_j`` (i <= j) of its entries.
+
+    Why: a policy that must choose among directions by how well each agrees with another input
+    (racing's road rays against the position or the velocity) needs products of inputs; a tanh
+    MLP on raw inputs did not learn them within the budget, a linear layer on these does.
+    """
+    i, j = np.triu_indices(x.shape[-1])
+    return jnp.concatenate([x, x[..., i] * x[..., j]], axis=-1)
+
+
 class ActorCritic(nn.Module):
     """Categorical policy logits and a state value from a flat observation.
 
@@ -54,16 +65,20 @@ class ActorCritic(nn.Module):
         num_actions: A, the number of discrete actions.
         hidden: widths of the hidden layers of each torso.
         activation: "tanh" or "relu".
+        quadratic: both torsos read ``quadratic_features(obs)`` instead of ``obs`` (for short
+            observations only: D inputs become D + D(D+1)/2).
     """
 
     num_actions: int
     hidden: Sequence[int] = (128, 128)
     activation: str = "tanh"
+    quadratic: bool = False
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
         """obs [..., D] (any dtype; cast to f32) -> (logits f32[..., A], value f32[...])."""
         x = obs.astype(jnp.float32)
+        x = quadratic_features(x) if self.quadratic else x
         logits = MLP(tuple(self.hidden), self.num_actions, 0.01, self.activation, name="actor")(x)
         value = MLP(tuple(self.hidden), 1, 1.0, self.activation, name="critic")(x)
         return logits, value[..., 0]

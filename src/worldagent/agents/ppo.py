@@ -90,6 +90,7 @@ class PPOConfig(JsonConfig):
     activation: str = "tanh"
     respawn: bool = True
     crash_warmup: float = 0.0
+    quadratic: bool = False
 
     def __post_init__(self):
         for name in ("total_episodes", "num_envs", "num_steps", "update_epochs", "num_minibatches"):
@@ -200,7 +201,7 @@ def single_agent_trainer(name: str, config_type: type, core, config, env, env_pa
 def _core(config: PPOConfig, env):
     """``init(key, consts)``, ``update(state, consts)`` and the network; consts = (env_params, distribution).
     Cached, so trainers of the same config and env share their compilation."""
-    network = ActorCritic(env.num_actions, config.hidden, config.activation)
+    network = ActorCritic(env.num_actions, config.hidden, config.activation, config.quadratic)
     tx = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam(eps=1e-5))
     batch = config.num_envs * config.num_steps
     minibatch = batch // config.num_minibatches

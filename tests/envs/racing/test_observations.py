@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from worldagent.envs import registry
-from worldagent.envs.racing.env import RAY_DIRECTIONS, ParticleRacing, RacingParams, road_pixels, road_rays
-from worldagent.envs.racing.world import ROAD_SIZE, to_pixel, unpack_road
+from worldagent.envs.racing.env import RAY_DIRECTIONS, ParticleRacing, RacingParams, road_here, road_pixels, road_rays
+from worldagent.envs.racing.tracks import rasterize
+from worldagent.envs.racing.world import RASTER_SIZE, ROAD_SIZE, Track, pack_road, to_pixel, unpack_road
 from worldagent.errors import WorldagentError
 
 PARAMS = RacingParams()
@@ -18,11 +19,19 @@ SURROUNDINGS = ParticleRacing(observation="surroundings", window=16, reach=64, c
 RAYS = ParticleRacing(observation="rays", reach=64)
 
 
+@pytest.fixture(scope="module")
+def oval():
+    """An ellipse 0.6 × 0.4, point 0 at its east end, driven counter-clockwise."""
+    theta = np.linspace(0.0, 2 * np.pi, 256, endpoint=False)
+    centreline = np.stack([0.6 * np.cos(theta), 0.4 * np.sin(theta)], axis=-1).astype(np.float32)
+    return Track(centreline, rasterize(centreline, RASTER_SIZE), pack_road(rasterize(centreline, ROAD_SIZE)))
+
+
 def first(tracks, i=0):
     return jax.tree_util.tree_map(lambda x: x[i], tracks)
 
 
-@pytest.mark.parametrize("env, size", [(SURROUNDINGS, 16 * 16 + 16 * 16 + 4), (RAYS, RAY_DIRECTIONS + 4)])
+@pytest.mark.parametrize("env, size", [(SURROUNDINGS, 16 * 16 + 16 * 16 + 4), (RAYS, RAY_DIRECTIONS + 8)])
 def test_observation_shape_and_no_route(track, env, size):
     obs, state = env.reset(KEY, track, PARAMS)
     assert obs.shape == env.observation_shape == (size,) and obs.dtype == jnp.float32
@@ -67,6 +76,16 @@ def test_rays_measure_the_road_ahead_on_a_straight(track):
     np.testing.assert_array_equal(off, 0.0)  # on the grass no ray starts on the road
 
 
+def test_road_here_is_the_nearest_centre_and_the_axis_either_way(oval):
+    """Off the middle of the road the offset points back to it; the axis is the same driven either way."""
+    _, state = RAYS.reset(KEY, oval, PARAMS)
+    centre, axis = road_here(oval.centreline, state.segment, state.position + jnp.array([0.01, 0.0]))  # east end, road runs north
+    np.testing.assert_allclose(centre, [-0.01, 0.0], atol=1e-4)
+    np.testing.assert_allclose(axis, [-1.0, 0.0], atol=0.05)  # θ ≈ 90°: (cos 180°, sin 180°)
+    backwards = oval.centreline[::-1]
+    np.testing.assert_allclose(road_here(backwards, 254, backwards[254])[1], axis, atol=0.05)
+
+
 @pytest.mark.parametrize("env", [SURROUNDINGS, RAYS], ids=["surroundings", "rays"])
 def test_observations_equal_under_jit_and_vmap(tracks, env):
     worlds = jax.tree_util.tree_map(lambda x: x[:4], tracks)
@@ -95,3 +114,16 @@ def test_spec_option_picks_the_observation():
         ParticleRacing(observation="surroundings", window=16, reach=50, coarse=16)
     with pytest.raises(WorldagentError, match="observation="):
         ParticleRacing(observation="pixels")
+
+
+def test_respawn_speed_restarts_along_the_road_in_the_driving_direction(oval):
+    """At the east end of the oval the road runs north; a respawn there restarts northwards at the given speed."""
+    env = RAYS
+    params = PARAMS.replace(respawn=True, respawn_speed=0.5)
+    _, state = env.reset(KEY, oval, params)
+    _, state = env.place(state, [0.6, 0.0], [0.05, 0.0], params)  # about to leave the road eastwards
+    _, after, reward, terminated, _, info = env.step(KEY, state, 0, params)
+    assert bool(info["crashed"]) and not bool(terminated) and float(reward) < -290
+    top = params.force / params.friction
+    np.testing.assert_allclose(np.linalg.norm(after.velocity), 0.5 * top, rtol=1e-5)
+    assert after.velocity[1] > 0.99 * 0.5 * top  # northwards: the way the oval is driven

@@ -29,11 +29,20 @@ Observations (``ParticleRacing.observation``):
   (fraction of road per block; pixels off the mask read as grass); then position and velocity
   as above. The fine window shows where the road's edges are (it is 2.5 pixels wide); the
   coarse one shows the corners ahead: at top speed (2.6 pixels a step) a 16-pixel window is 3
-  steps of sight, shorter than the ~10 steps braking takes (``docs/racing.md`` has the designs
-  tried and what they reached).
+  steps of sight, shorter than the ~10 steps braking takes.
+- ``"rays"`` (the road around the agent, summarised; no route), f32[R + 8]: how far the road
+  runs from the agent in ``RAY_DIRECTIONS`` directions (``road_rays``, over ``reach / 2``
+  pixels of the mask), the nearest centreline point relative to the agent over the half-width
+  and the road's axis ``(cos 2θ, sin 2θ)`` (``road_here``: the road's middle and its line,
+  exactly, but not which way it is driven), then position and velocity.
+
+Without the route neither names which way along the road is forward: the agent has its
+position (tracks run counter-clockwise around the middle) and its velocity. That, not seeing
+the road, is what limits learning (``docs/racing.md`` has the designs tried and what they reached).
 
 Training-time respawn (``RacingParams.respawn``): a crash costs the crash penalty, puts the
-particle back on the centreline at rest and the episode goes on (``crashed`` stays true). With
+particle back on the centreline (at rest, or moving along the road at ``respawn_speed``) and the
+episode goes on (``crashed`` stays true). With
 crashes ending episodes, a learner that crashes after ~15 steps spends the 10,000-episode budget
 on 150,000 steps; with respawn every episode lasts until the lap or the time limit and teaches
 the whole track. Evaluation always uses the paper's rule (a crash ends the episode).
@@ -87,6 +96,9 @@ class RacingParams:
         half_width: road half-width in normalised units (upstream: 40/6 units = 0.02).
         respawn: on a crash, go back to the centreline at rest and carry on instead of ending
             the episode (for training; see the module docstring).
+        respawn_speed: speed after a respawn, as a fraction of the top speed, along the road in
+            the driving direction (0: at rest). Without a route sensor the agent tells which
+            way the road goes from its velocity; at rest it cannot (``docs/racing.md``).
     """
 
     force: float = 0.004
@@ -97,6 +109,7 @@ class RacingParams:
     max_steps: int = 300
     half_width: float = HALF_WIDTH
     respawn: bool = False
+    respawn_speed: float = 0.0
 
 
 @struct.dataclass
@@ -212,7 +225,7 @@ class ParticleRacing(Environment):
         if self.observation == "surroundings":
             return (self.window * self.window + self.coarse * self.coarse + 4,)
         if self.observation == "rays":
-            return (RAY_DIRECTIONS + 4,)
+            return (RAY_DIRECTIONS + 8,)
         return (self.window * self.window + 4 + 2 * len(self.route),)
 
     # -- host-side checks (shapes always; values whenever they are concrete) ------------------
@@ -275,7 +288,8 @@ class ParticleRacing(Environment):
         lap_completed = jnp.logical_and(progress >= 1.0, ~crashed)
         reward = -params.step_penalty + params.lap_reward * advance - params.crash_penalty * crashed
         respawn = jnp.logical_and(params.respawn, crashed)
-        position, velocity, arc, progress = _respawn_where(respawn, state.world.centreline, segment, position, velocity, arc, progress)
+        restart = params.respawn_speed * params.force / params.friction
+        position, velocity, arc, progress = _respawn_where(respawn, state.world.centreline, segment, position, velocity, arc, progress, restart)
         terminated = jnp.logical_or(jnp.logical_and(crashed, ~respawn), lap_completed)
         truncated = jnp.logical_and(time >= params.max_steps, ~terminated)
 
@@ -306,7 +320,8 @@ class ParticleRacing(Environment):
             fine, coarse = surroundings_view(state.world.road, state.position, self.window, self.reach, self.coarse)
             parts = [fine.reshape(-1), coarse.reshape(-1), *motion]
         elif self.observation == "rays":
-            parts = [road_rays(state.world.road, state.position, self.reach // 2), *motion]
+            centre, axis = road_here(state.world.centreline, state.segment, state.position)
+            parts = [road_rays(state.world.road, state.position, self.reach // 2), centre / params.half_width, axis, *motion]
         else:
             centreline = state.world.centreline
             ahead = centreline[(state.segment + jnp.asarray(self.route, jnp.int32)) % centreline.shape[0]]
@@ -316,16 +331,17 @@ class ParticleRacing(Environment):
         return jnp.concatenate([p.astype(jnp.float32) for p in parts])
 
 
-def _respawn_where(respawn, centreline, segment, position, velocity, arc, progress):
-    """Where ``respawn``: the agent back at its segment's start point, at rest, progress adjusted.
+def _respawn_where(respawn, centreline, segment, position, velocity, arc, progress, speed=0.0):
+    """Where ``respawn``: the agent back at its segment's start point with ``speed`` along it, progress adjusted.
 
     Progress moves back by the same lap fraction as the position, so a respawn never counts as
     progress (the next step measures its advance from the respawn point).
     """
     back_arc = segment.astype(jnp.float32) / centreline.shape[0]
+    ahead = centreline[(segment + 1) % centreline.shape[0]] - centreline[segment]
     return (
         jnp.where(respawn, centreline[segment].astype(jnp.float32), position),
-        jnp.where(respawn, 0.0, velocity),
+        jnp.where(respawn, speed * ahead / jnp.maximum(jnp.linalg.norm(ahead), 1e-9), velocity),
         jnp.where(respawn, back_arc, arc),
         jnp.where(respawn, progress + wrap_half(back_arc - arc), progress),
     )
@@ -372,6 +388,18 @@ def surroundings_view(road: jax.Array, position: jax.Array, window: int, reach: 
     region = pixels[region_at : region_at + reach, region_at : region_at + reach].astype(jnp.float32)
     block = reach // coarse
     return fine, region.reshape(coarse, block, coarse, block).mean(axis=(1, 3))
+
+
+def road_here(centreline: jax.Array, segment: jax.Array, position: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The road where the agent is, exactly (the road mask's pixels are 0.78 of a half-width wide):
+    (f32[2] the nearest point of the centreline relative to ``position``, f32[2] the road's axis
+    ``(cos 2θ, sin 2θ)`` of its direction θ; the same for either way along it, so it holds no route)."""
+    num_points = centreline.shape[0]
+    start, end = centreline[segment], centreline[(segment + 1) % num_points]
+    direction = end - start
+    t = jnp.clip(jnp.dot(position - start, direction) / jnp.maximum(jnp.dot(direction, direction), 1e-12), 0.0, 1.0)
+    theta = jnp.arctan2(direction[1], direction[0])
+    return start + t * direction - position, jnp.stack([jnp.cos(2 * theta), jnp.sin(2 * theta)])
 
 
 def road_rays(road: jax.Array, position: jax.Array, reach: int) -> jax.Array:

@@ -21,7 +21,7 @@ def make(options):
         env = ParticleRacing(observation="rays", reach=options["reach"])
     else:
         env = ParticleRacing()
-    return env, env.default_params
+    return env, env.default_params.replace(respawn_speed=options["respawn_speed"])
 
 
 def parse_observation(text: str) -> str:
@@ -30,6 +30,13 @@ def parse_observation(text: str) -> str:
     if text not in OBSERVATIONS:
         raise ValueError(f"unknown observation {text!r}; use {' or '.join(OBSERVATIONS)}")
     return text
+
+
+def parse_fraction(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"{value} is not a fraction in [0, 1]")
+    return value
 
 
 def parse_reach(text: str) -> int:
@@ -157,6 +164,12 @@ SPEC = register(
                 "route: position, velocity and 8 centreline points ahead; surroundings: the paper's, the road around the agent, position, velocity",
                 parse_observation,
                 "route",
+            ),
+            EnvOption(
+                "respawn_speed",
+                "training respawns: speed along the road afterwards, fraction of the top speed (0: at rest)",
+                parse_fraction,
+                0.0,
             ),
             EnvOption("reach", "surroundings: side of the coarse road view around the agent, pixels of 1/64 unit (multiple of 16)", parse_reach, 64),
         ),

@@ -76,8 +76,9 @@ TRIED = [
     "estimates 2-20x low outside their intervals at 1e-2 and 1e-3",
     "kernels of bandwidth 0.7 around the hits after the search, no wide share: covered 7/9 (2/3 missed at 1e-4); "
     "ratio 2.9-3.8 at 1e-3, 15-23 at 1e-4",
-    "kernels in the search rounds too, rounds of 250: covered 6/9; ratio 5.4-6.5 at 1e-3, 7-32 at 1e-4",
-    "shorter searches (4 rounds of 500, or 8 of 250): covered 6/9 and 5/9; ratio up to 7.6 at 1e-3, in runs that missed",
+    "kernels in the search rounds too: rounds of 500 covered 6/9, ratio 3.8-4.1 at 1e-3, 16-21 at 1e-4; "
+    "rounds of 250 covered 7/9, ratio 5.4-6.5 at 1e-3, 7-32 at 1e-4",
+    "shorter searches (4 rounds of 500, or 8 of 250): covered 6/9 and 5/9; ratio 2.6-7.6 at 1e-3 (7.6 in runs that missed), 5.6-42 at 1e-4",
     "kept: search 10 x 500 with shifted priors, then kernels 0.7 plus the search's mixture at share 0.3: covered 8/9 "
     "(seed 2 missed at 1e-2); ratio 3.3-3.6 at 1e-3, 6.8-14.5 at 1e-4",
     "oracle bound (no search cost): a mixture centred on the reference's cells with shares by mass reaches at 1e-3 "

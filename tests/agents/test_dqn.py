@@ -19,7 +19,7 @@ from worldagent.agents import replay as replay_lib
 from worldagent.agents import training
 from worldagent.agents.algorithms import training_config
 from worldagent.agents.distributions import WorldPool
-from worldagent.agents.dqn import DQNConfig, make_train
+from worldagent.agents.dqn import DQNConfig, epsilon_at, make_train
 from worldagent.agents.loaders import load_agent
 from worldagent.agents.policy import Policy, network_policy
 from worldagent.agents.saved import load_policy, save_policy
@@ -177,11 +177,23 @@ def test_make_train_is_vmappable_over_seeds(spec, tiny_pool):
         ({"act_epsilon": 2.0}, "act_epsilon"),
         ({"buffer_size": 10}, "buffer_size"),
         ({"epsilon_end": 0.5, "epsilon_start": 0.1}, "exploration"),
+        ({"epsilon_decay_fraction": 1.5}, "epsilon_decay_fraction"),
     ],
 )
 def test_bad_configs_are_refused(change, message):
     with pytest.raises(WorldagentError, match=message):
         TINY.replace(**change)
+
+
+def test_exploration_decays_over_its_episodes_or_a_share_of_the_budget():
+    default = DQNConfig()
+    assert default.decay_episodes == 1_000 and default.with_episodes(1_000).decay_episodes == 1_000
+    share = default.replace(num_episodes=1_000, epsilon_decay_episodes=None)
+    assert share.decay_episodes == 200 and share.with_episodes(5_000).decay_episodes == 1_000  # 0.2 of the budget
+    assert DQNConfig.from_dict(share.to_dict()) == share
+    steps_to_decay = 200 * 1_000 // share.num_envs
+    assert float(epsilon_at(share, jnp.int32(steps_to_decay // 2), 1_000)) == pytest.approx(0.55)
+    assert float(epsilon_at(share, jnp.int32(steps_to_decay), 1_000)) == pytest.approx(0.1)
 
 
 def test_bad_env_algorithm_and_distribution_are_refused(spec, tiny_pool, tmp_path):

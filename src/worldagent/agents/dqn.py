@@ -73,7 +73,14 @@ class DQNConfig(JsonConfig):
             i.e. 20,000 env transitions per agent at 40 envs; Mnih et al. 2015: 10,000].
         epsilon_start, epsilon_end: epsilon-greedy exploration, decayed linearly [Leibo et al.
             2017 / Perolat et al. 2017: 1.0 to 0.1 †].
-        epsilon_decay_episodes: episodes over which epsilon decays [ours: the first 20%].
+        epsilon_decay_episodes: episodes over which epsilon decays [ours: 1,000, the first 20% of
+            the paper's 5,000; Mnih et al. 2015 decay over the first 1M of 50M frames]. None:
+            ``epsilon_decay_fraction`` of the budget instead.
+        epsilon_decay_fraction: with ``epsilon_decay_episodes=None``, the share of ``num_episodes``
+            over which epsilon decays, as Stable-Baselines3's DQN ``exploration_fraction``
+            [ours: 0.2]. Not the default: at the quick preset's 1,000 episodes, a 200-episode
+            decay left the agents weaker (group reward on random G(z) worlds 71-101 against
+            126-132 with the 1,000-episode decay; docs/harvest.md, the quick preset).
         double_q: use double-DQN targets [off: Perolat used DQN].
         act_epsilon: exploration of the trained agents when they act (saved with the agents)
             [ours: 0.1 = ``epsilon_end``, the agents as they acted at the end of training and as
@@ -99,7 +106,8 @@ class DQNConfig(JsonConfig):
     target_update_every: int = 500
     epsilon_start: float = 1.0
     epsilon_end: float = 0.1
-    epsilon_decay_episodes: int = 1000
+    epsilon_decay_episodes: int | None = 1000
+    epsilon_decay_fraction: float = 0.2
     double_q: bool = False
     act_epsilon: float = 0.1
 
@@ -117,8 +125,15 @@ class DQNConfig(JsonConfig):
             raise WorldagentError("DQNConfig.learning_rate and max_grad_norm must be positive.")
         if not 0.0 <= self.act_epsilon <= 1.0:
             raise WorldagentError(f"DQNConfig.act_epsilon={self.act_epsilon}; pick a probability in [0, 1].")
-        if not 0.0 <= self.epsilon_end <= self.epsilon_start <= 1.0 or self.epsilon_decay_episodes < 0:
-            raise WorldagentError("DQNConfig: exploration needs 0 <= epsilon_end <= epsilon_start <= 1 and epsilon_decay_episodes >= 0.")
+        decay = self.epsilon_decay_episodes
+        if (
+            not 0.0 <= self.epsilon_end <= self.epsilon_start <= 1.0
+            or not 0.0 <= self.epsilon_decay_fraction <= 1.0
+            or (decay is not None and decay < 0)
+        ):
+            raise WorldagentError(
+                "DQNConfig: exploration needs 0 <= epsilon_end <= epsilon_start <= 1, epsilon_decay_fraction in [0, 1] and epsilon_decay_episodes >= 0."
+            )
         if self.learning_starts < 0 or self.buffer_size < 2 * self.num_envs:
             raise WorldagentError(
                 f"DQNConfig.buffer_size ({self.buffer_size}) must hold at least two steps of {self.num_envs} envs and learning_starts be >= 0."
@@ -128,6 +143,13 @@ class DQNConfig(JsonConfig):
     def num_chunks(self) -> int:
         """Chunks of ``num_envs`` parallel episodes: ceil(num_episodes / num_envs)."""
         return -(-self.num_episodes // self.num_envs)
+
+    @property
+    def decay_episodes(self) -> int:
+        """Episodes over which epsilon decays: ``epsilon_decay_episodes``, else that share of the budget."""
+        if self.epsilon_decay_episodes is not None:
+            return self.epsilon_decay_episodes
+        return round(self.epsilon_decay_fraction * self.num_episodes)
 
     @property
     def buffer_slices(self) -> int:
@@ -163,7 +185,7 @@ def epsilon_greedy(key: jax.Array, q: jax.Array, epsilon: jax.Array) -> jax.Arra
 
 def epsilon_at(config: DQNConfig, step: jax.Array, episode_length: int) -> jax.Array:
     """f32 exploration rate after ``step`` vector steps (linear decay, then constant)."""
-    decay_steps = max(1, config.epsilon_decay_episodes * episode_length // config.num_envs)
+    decay_steps = max(1, config.decay_episodes * episode_length // config.num_envs)
     fraction = jnp.clip(step / decay_steps, 0.0, 1.0)
     return config.epsilon_start + fraction * (config.epsilon_end - config.epsilon_start)
 
@@ -255,7 +277,8 @@ def make_train(config: DQNConfig, env, env_params, distribution) -> Trainer:
     if not isinstance(config, DQNConfig):
         raise WorldagentError(f"config is a {type(config).__name__}; pass a DQNConfig.")
     check_env(env)
-    init, update = _core(config.replace(num_episodes=1), env, int(env_params.max_steps))
+    # the core is shared by every budget, so the budget-dependent decay is fixed here
+    init, update = _core(config.replace(num_episodes=1, epsilon_decay_episodes=config.decay_episodes), env, int(env_params.max_steps))
     return budgeted_trainer(init, update, config.num_episodes, config.num_chunks, q_network(config, env), (env_params, distribution))
 
 

@@ -277,28 +277,33 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=None, help="keep the brute-force values here and reuse them (same G, worlds, seed)")
     parser.add_argument("--brute-force-only", action="store_true", help="only the brute force (to fill --cache); writes no result")
     args = parser.parse_args()
-    start = time.perf_counter()
-    results = {env: run_env(env, args) for env in args.envs}
-    if args.brute_force_only:
-        return
+    start, results = time.perf_counter(), {}
+    for env in args.envs:
+        results[env] = run_env(env, args)
+        if not args.brute_force_only:  # written after each env, so a late failure keeps the finished ones
+            write_results(args, results, time.perf_counter() - start)
+
+
+def write_results(args, results: dict, seconds: float) -> None:
+    """``benchmarks/results/failure-rate.json``: the machine, the settings, the proposals tried and each env's events."""
+    import json
+
     payload = {
         "benchmark": "failure_rate",
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "machine": describe_machine(),
         "settings": {
-            **vars(args),
+            **{key: str(value) if isinstance(value, Path) else value for key, value in vars(args).items()},
             "envs": {env: ENVS[env] for env in args.envs},
             "importance": fr.ImportanceConfig().__dict__,
             "batch": {"mc": 1000, "is": args.is_batch},
             "min_hits": fr.MIN_HITS,
         },
-        "seconds": round(time.perf_counter() - start, 1),
+        "seconds": round(seconds, 1),
         "tried": TRIED,
         **results,
     }
-    import json
-
-    print("->", write_text(RESULTS / "failure-rate.json", json.dumps(payload, indent=2) + "\n"))
+    print("->", write_text(RESULTS / "failure-rate.json", json.dumps(payload, indent=2) + "\n"), flush=True)
 
 
 if __name__ == "__main__":

@@ -27,13 +27,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from machine import RESULTS, describe_machine, record  # noqa: E402
-from worldagent.agents.algorithms import get_algorithm, training_config  # noqa: E402
+from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import LatentWorlds, world_distribution  # noqa: E402
-from worldagent.agents.policy import network_policy  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.envs.core import rollout  # noqa: E402
@@ -136,35 +134,6 @@ def run_one(algo: str, options: dict, seed: int, args, pool, out_root: Path) -> 
     return [result_row(algo, options, overrides, config, seed, args, trained, result.agent.policy, env, params, jax.random.key(args.eval_seed))]
 
 
-def run_vmapped(algo: str, options: dict, seeds: list[int], args, pool) -> list[dict]:
-    """Train every seed at once (``jax.vmap(trainer.train)``, one jitted call, no checkpoints) and evaluate each; their rows.
-
-    Each row's ``train_seconds`` is the whole call's wall time divided by the number of seeds."""
-    env, params = SPEC.make_env(options)
-    overrides = args.overrides.get(algo, {})
-    config = training_config(SPEC, algo, episodes=args.episodes, **overrides)
-    trainer = get_algorithm(algo).make_train(config, env, params, pool)  # it sets respawn
-    start = time.perf_counter()
-    states, curves = jax.block_until_ready(jax.jit(jax.vmap(trainer.train))(jax.vmap(jax.random.key)(jnp.asarray(seeds))))
-    wall = time.perf_counter() - start
-    rows = []
-    for i, seed in enumerate(seeds):
-        state = jax.tree_util.tree_map(lambda x: x[i], states)
-        active = np.asarray(curves["active"][i]) > 0
-        trained = {
-            "training": f"jax.vmap(trainer.train) over seeds {seeds}, one jitted call; train_seconds = its wall time / {len(seeds)}",
-            "train_seconds": round(wall / len(seeds), 1),
-            "resumed_from_update": None,
-            "episodes": int(state.episodes),
-            "env_steps": int(state.env_steps),
-            "env_steps_per_s": round(int(state.env_steps) * len(seeds) / wall),
-            "final_curve": {k: float(np.asarray(v[i])[active][-1]) for k, v in curves.items() if active.any()},
-        }
-        policy = network_policy(trainer.network, state.params, get_algorithm(algo).network_kind)
-        rows.append(result_row(algo, options, overrides, config, seed, args, trained, policy, env, params, jax.random.key(args.eval_seed)))
-    return rows
-
-
 def summarise(runs: list[dict]) -> list[dict]:
     """Per algorithm × observation × options × budget: seeds, how many lap at ``LAP_TARGET``, means."""
     groups: dict[str, list[dict]] = {}
@@ -233,7 +202,6 @@ def main() -> None:
     parser.add_argument("--name", default="train-racing", help="results file: benchmarks/results/NAME-<backend>.json")
     parser.add_argument("--out-root", type=Path, default=Path("runs/agents/train-racing"))
     parser.add_argument("--no-resume", action="store_true")
-    parser.add_argument("--vmap-seeds", action="store_true", help="train all seeds in one vmapped jitted call (faster on CPU; no checkpoints)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args()
     args.overrides = parse_overrides(args.set)
@@ -244,11 +212,9 @@ def main() -> None:
     for observation in args.observations:
         options = SPEC.parse_options([f"observation={observation}", *args.option])
         for algo in args.algos:
-            if args.vmap_seeds:
-                batches = [run_vmapped(algo, options, args.seeds, args, pool)]
-            else:
-                batches = (run_one(algo, options, seed, args, pool, args.out_root) for seed in args.seeds)
-            for batch in batches:
+            # one seed at a time through the host driver: jit(vmap(train)) over 5 seeds stalled
+            # in XLA's CPU runtime here (as in issue 5's note), using ~2% of a core for 20 minutes
+            for batch in (run_one(algo, options, seed, args, pool, args.out_root) for seed in args.seeds):
                 for run in batch:
                     print(
                         f"{algo} {observation} {options} {args.overrides.get(algo, {})} seed {run['seed']}: {run['episodes']:,} episodes, "

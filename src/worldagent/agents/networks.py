@@ -51,8 +51,9 @@ def quadratic_features(x: jax.Array) -> jax.Array:
     """f32[..., D + D(D+1)/2]: ``x`` and the products ``x_i x_j`` (i <= j) of its entries.
 
     Why: a policy that must choose among directions by how well each agrees with another input
-    (racing's road rays against the position or the velocity) needs products of inputs; a tanh
-    MLP on raw inputs did not learn them within the budget, a linear layer on these does.
+    (racing's road rays against the position or the velocity) needs products of inputs. With
+    them PPO on racing's rays went 0.33 → 0.49 of a lap per episode at 10,000 episodes
+    (``docs/racing.md``).
     """
     i, j = np.triu_indices(x.shape[-1])
     return jnp.concatenate([x, x[..., i] * x[..., j]], axis=-1)

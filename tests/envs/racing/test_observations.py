@@ -104,8 +104,11 @@ def test_observations_equal_under_jit_and_vmap(tracks, env):
 def test_spec_option_picks_the_observation():
     spec = registry.get("racing")
     assert spec.make_env()[0].observation == "route"
-    env, _ = spec.make_env(spec.parse_options(["observation=surroundings", "reach=96"]))
-    assert env.observation == "surroundings" and env.reach == 96 and env.window == 16
+    env, params = spec.make_env(spec.parse_options(["observation=surroundings", "reach=96", "respawn_speed=0.5"]))
+    assert env.observation == "surroundings" and env.reach == 96 and env.window == 16 and params.respawn_speed == 0.5
+    assert spec.make_env({"observation": "rays"})[0].observation_shape == (RAY_DIRECTIONS + 8,)
+    with pytest.raises(WorldagentError, match="fraction"):
+        spec.parse_options(["respawn_speed=2"])
     with pytest.raises(WorldagentError, match="observation"):
         spec.parse_options(["observation=pixels"])
     with pytest.raises(WorldagentError, match="multiple of 16"):

@@ -23,7 +23,7 @@ def test_train_writes_run_and_resumes_identically(tmp_path, racing_spec, racing_
     for name in ("run.json", "checkpoint.msgpack", "curve.csv", "curve.png", "policy/policy.json", "policy/policy.msgpack"):
         assert (tmp_path / "whole" / name).is_file(), name
     record = json.loads((tmp_path / "whole" / "run.json").read_text())
-    assert (record["seed"], record["env"], record["algorithm"], record["options"]) == (3, "racing", "ppo", {})
+    assert (record["seed"], record["env"], record["algorithm"], record["options"]) == (3, "racing", "ppo", racing_spec.check_options({}))
     assert len(whole.curve["return"]) == int(whole.agent.extra["updates"])
     for field in ("crashed", "lap_completed", "progress", "policy_loss", "active"):  # the env's info entries are curve columns
         assert field in whole.curve, field

@@ -31,7 +31,7 @@ def first(tracks, i=0):
     return jax.tree_util.tree_map(lambda x: x[i], tracks)
 
 
-@pytest.mark.parametrize("env, size", [(SURROUNDINGS, 16 * 16 + 16 * 16 + 4), (RAYS, RAY_DIRECTIONS + 8)])
+@pytest.mark.parametrize("env, size", [(SURROUNDINGS, 16 * 16 + 16 * 16 + 4), (RAYS, RAY_DIRECTIONS + 10)])
 def test_observation_shape_and_no_route(track, env, size):
     obs, state = env.reset(KEY, track, PARAMS)
     assert obs.shape == env.observation_shape == (size,) and obs.dtype == jnp.float32
@@ -106,7 +106,7 @@ def test_spec_option_picks_the_observation():
     assert spec.make_env()[0].observation == "route"
     env, params = spec.make_env(spec.parse_options(["observation=surroundings", "reach=96", "respawn_speed=0.5"]))
     assert env.observation == "surroundings" and env.reach == 96 and env.window == 16 and params.respawn_speed == 0.5
-    assert spec.make_env({"observation": "rays"})[0].observation_shape == (RAY_DIRECTIONS + 8,)
+    assert spec.make_env({"observation": "rays"})[0].observation_shape == (RAY_DIRECTIONS + 10,)
     with pytest.raises(WorldagentError, match="fraction"):
         spec.parse_options(["respawn_speed=2"])
     with pytest.raises(WorldagentError, match="observation"):
@@ -130,3 +130,12 @@ def test_respawn_speed_restarts_along_the_road_in_the_driving_direction(oval):
     top = params.force / params.friction
     np.testing.assert_allclose(np.linalg.norm(after.velocity), 0.5 * top, rtol=1e-5)
     assert after.velocity[1] > 0.99 * 0.5 * top  # northwards: the way the oval is driven
+
+
+def test_rays_heading_is_the_unit_velocity_once_moving(track):
+    """The heading (before position and velocity) has unit length at any speed above the floor and is 0 at rest."""
+    obs, state = RAYS.reset(KEY, track, PARAMS)
+    np.testing.assert_array_equal(obs[-6:-4], 0.0)
+    for speed in (0.004, 0.04):  # one push, the top speed
+        _, moving = RAYS.place(state, np.asarray(track.centreline[0]), [0.0, speed], PARAMS)
+        np.testing.assert_allclose(RAYS.observe(moving, PARAMS)[-6:-4], [0.0, 1.0], atol=1e-6)

@@ -30,11 +30,14 @@ Observations (``ParticleRacing.observation``):
   as above. The fine window shows where the road's edges are (it is 2.5 pixels wide); the
   coarse one shows the corners ahead: at top speed (2.6 pixels a step) a 16-pixel window is 3
   steps of sight, shorter than the ~10 steps braking takes.
-- ``"rays"`` (the road around the agent, summarised; no route), f32[R + 8]: how far the road
+- ``"rays"`` (the road around the agent, summarised; no route), f32[R + 10]: how far the road
   runs from the agent in ``RAY_DIRECTIONS`` directions (``road_rays``, over ``reach / 2``
   pixels of the mask), the nearest centreline point relative to the agent over the half-width
   and the road's axis ``(cos 2θ, sin 2θ)`` (``road_here``: the road's middle and its line,
-  exactly, but not which way it is driven), then position and velocity.
+  exactly, but not which way it is driven), the heading (the velocity at unit length, shrinking
+  to 0 below ``HEADING_MIN_SPEED`` of the top speed), then position and velocity. The heading is
+  the paper's "directional speed" at any speed: with the velocity alone, a cautious learner's
+  slow driving (a few pushes' worth) hid which way it was going, and it did not learn to lap.
 
 Without the route neither names which way along the road is forward: the agent has its
 position (tracks run counter-clockwise around the middle) and its velocity. That, not seeing
@@ -71,6 +74,7 @@ ROUTE_OFFSETS = (1, 3, 5, 8, 11, 15, 20, 26)
 ROUTE_SCALE = 0.1
 
 OBSERVATIONS = ("route", "surroundings", "rays")
+HEADING_MIN_SPEED = 0.05  # "rays": below this fraction of the top speed the heading shrinks to 0
 RAY_DIRECTIONS = 16  # "rays": directions, evenly spaced from east, counter-clockwise
 RAY_SAMPLES_PER_PIXEL = 2  # "rays": samples along each ray per road-mask pixel
 
@@ -225,7 +229,7 @@ class ParticleRacing(Environment):
         if self.observation == "surroundings":
             return (self.window * self.window + self.coarse * self.coarse + 4,)
         if self.observation == "rays":
-            return (RAY_DIRECTIONS + 8,)
+            return (RAY_DIRECTIONS + 10,)
         return (self.window * self.window + 4 + 2 * len(self.route),)
 
     # -- host-side checks (shapes always; values whenever they are concrete) ------------------
@@ -321,7 +325,9 @@ class ParticleRacing(Environment):
             parts = [fine.reshape(-1), coarse.reshape(-1), *motion]
         elif self.observation == "rays":
             centre, axis = road_here(state.world.centreline, state.segment, state.position)
-            parts = [road_rays(state.world.road, state.position, self.reach // 2), centre / params.half_width, axis, *motion]
+            speed = jnp.linalg.norm(state.velocity)
+            heading = state.velocity / jnp.maximum(speed, HEADING_MIN_SPEED * top_speed)  # unit length once moving
+            parts = [road_rays(state.world.road, state.position, self.reach // 2), centre / params.half_width, axis, heading, *motion]
         else:
             centreline = state.world.centreline
             ahead = centreline[(state.segment + jnp.asarray(self.route, jnp.int32)) % centreline.shape[0]]

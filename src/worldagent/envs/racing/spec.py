@@ -161,7 +161,7 @@ SPEC = register(
         options=(
             EnvOption(
                 "observation",
-                "route: position, velocity and 8 centreline points ahead; surroundings: the paper's, the road around the agent, position, velocity",
+                "route: position, velocity, 8 centreline points ahead; rays (no route, the paper's): road rays, heading, position, velocity; surroundings: road window + coarse view, position, velocity",
                 parse_observation,
                 "route",
             ),

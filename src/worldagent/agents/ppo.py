@@ -39,8 +39,9 @@ class PPOConfig(JsonConfig):
 
     What the defaults reach (``benchmarks/train_racing.py``, 2 CPU cores): see the README's
     measured figures. Two choices make racing learnable at this budget (both in the env, see
-    ``envs/racing/env.py``): the route sensor in the observation, and respawn-on-crash while
-    training (``respawn``). Without them the agent parks before the first bend (a parked
+    ``envs/racing/env.py``): the route sensor in the observation (or, without a route, the
+    "rays" observation with its heading, plus ``crash_warmup`` and ``quadratic``; see
+    ``docs/racing.md``), and respawn-on-crash while training (``respawn``). Without them the agent parks before the first bend (a parked
     episode, −60, beats the −300 crashes that learning to corner costs) whatever else was tried
     (entropy 0.03, γ 0.995, centring shaping, a CNN on the window, penalty curricula).
 

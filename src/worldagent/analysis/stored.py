@@ -11,8 +11,6 @@ from __future__ import annotations
 
 from functools import partial
 
-import numpy as np
-
 from worldagent.analysis import failure_rate as fr
 from worldagent.errors import WorldagentError
 
@@ -45,9 +43,10 @@ def read_estimate(store, name: str) -> fr.Estimate:
         raise WorldagentError(f"estimate {name!r} is unfinished in {store.path}; rerun `worldagent failure-rate` with its settings to finish it.")
 
     evaluate = fr.StoredEvaluate(store, campaign, unfinished, partial(fr.score_worlds, selection))
+    dim = len(first.latent)
     common = dict(seed=campaign.seed, batch=config["batch"], target_width=config.get("target_width"))
     if campaign.optimiser == "is":
         fields = fr.ImportanceConfig.__dataclass_fields__
         importance = fr.ImportanceConfig(**{k: v for k, v in config.items() if k in fields})
-        return fr.importance_sampling(evaluate, len(first.latent), config["worlds"], config=importance, **common)
-    return fr.monte_carlo(evaluate, len(np.asarray(first.latent)), config["worlds"], **common)
+        return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, **common)
+    return fr.monte_carlo(evaluate, dim, config["worlds"], **common)

@@ -122,14 +122,17 @@ def setup(
             ``worldagent train`` run dir, the policy dir inside it, a scripted policy's name
             (``spec.scripted``), a ``.onnx`` model, a Stable-Baselines3 ``.zip``, or ``module:function``.
         generator: a ``Generator`` or its directory (``worldagent generator train``).
-        options: env options (harvest: ``{"tagger": (0,)}``).
+        options: env options (harvest: ``{"tagger": (0,)}``); those not given are the saved agent's
+            own (``policy.json``), then the defaults.
         greedy: trained actor-critics act by argmax instead of sampling.
         stochastic: external agents that return logits sample them instead of taking the argmax.
         repeats: episodes per world (the paper: 8).
         backend: a backend (``evaluation.backends.make_backend``) or None (this process).
     """
+    from worldagent.agents.loaders import agent_options
+
     spec = registry.get(env)
-    options = spec.check_options(options)
+    options = agent_options(spec, agent, options)
     if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
         raise WorldagentError(f"repeats={repeats!r}; play at least one episode per world.")
     env_obj, params = spec.make_env(options)

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from worldagent.agents.loaders import load_agent
+from worldagent.agents.loaders import agent_options, load_agent
 from worldagent.agents.networks import ActorCritic, QNetwork
 from worldagent.agents.saved import load_policy, save_policy
 from worldagent.envs.core import rollout
@@ -13,11 +13,20 @@ from worldagent.envs.racing.env import episode_metrics
 from worldagent.errors import WorldagentError
 
 
-def _saved(tmp_path, hidden=(16,)):
+def _saved(tmp_path, hidden=(16,), obs_shape=(260,), extra=None):
     net = ActorCritic(4, hidden)
-    params = net.init(jax.random.key(0), jnp.zeros(260))
+    params = net.init(jax.random.key(0), jnp.zeros(obs_shape))
     save_policy(
-        tmp_path, net, params, kind="actor_critic", algorithm="ppo", env="racing", obs_shape=(260,), num_actions=4, training={"total_episodes": 1}
+        tmp_path,
+        net,
+        params,
+        kind="actor_critic",
+        algorithm="ppo",
+        env="racing",
+        obs_shape=obs_shape,
+        num_actions=4,
+        training={"total_episodes": 1},
+        extra=extra,
     )
     return net, params
 
@@ -69,8 +78,8 @@ def test_stacked_q_networks_round_trip(tmp_path):
 
 
 def test_load_agent_takes_run_dirs_policy_dirs_and_scripted_names(tmp_path, racing_spec, racing_env, racing_pool):
-    _saved(tmp_path / "run" / "policy")
-    obs = jnp.zeros(260)
+    _saved(tmp_path / "run" / "policy", obs_shape=racing_env.observation_shape)
+    obs = jnp.zeros(racing_env.observation_shape)
     for text in (tmp_path / "run", tmp_path / "run" / "policy"):
         policy = load_agent(racing_spec, str(text), greedy=True)
         assert policy.act(policy.params, obs, jax.random.key(0), None).shape == ()
@@ -87,3 +96,16 @@ def test_load_agent_takes_run_dirs_policy_dirs_and_scripted_names(tmp_path, raci
         load_agent(racing_spec, "greedy")
     with pytest.raises(WorldagentError, match="racing agent, not a harvest"):
         load_agent("harvest", str(tmp_path / "run"))
+
+
+def test_saved_agents_play_with_the_options_they_trained_with(tmp_path, racing_spec):
+    rays = racing_spec.make_env({"observation": "rays"})[0].observation_shape
+    _saved(tmp_path / "run" / "policy", obs_shape=rays, extra={"options": {"observation": "rays", "respawn_speed": 0.5, "gone": 1}})
+    run = str(tmp_path / "run")
+    options = agent_options(racing_spec, run)  # recorded options fill what is not given; unknown ones are dropped
+    assert options["observation"] == "rays" and options["respawn_speed"] == 0.5 and "gone" not in options
+    assert agent_options(racing_spec, run, {"respawn_speed": 0.0})["respawn_speed"] == 0.0
+    assert agent_options(racing_spec, "driver") == racing_spec.check_options()
+    assert load_agent(racing_spec, run, options=options).act is not None
+    with pytest.raises(WorldagentError, match=r"trained on observations of shape \(26,\).*--option"):
+        load_agent(racing_spec, run, options={"observation": "route"})

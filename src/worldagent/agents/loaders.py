@@ -12,6 +12,7 @@ Every policy carries its ``source`` (kind, path, file hash), which campaigns rec
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,34 @@ def policy_dir(text: str | Path) -> Path | None:
     return None
 
 
+def agent_options(spec: Any, agent: Any, given: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The env options to play ``agent`` with: ``given`` first, then those a saved agent recorded
+    when it trained (so a ``rays`` racing agent plays ``rays`` with no flag), then the defaults."""
+    spec = registry.get(spec)
+    directory = policy_dir(agent) if isinstance(agent, (str, Path)) else None
+    recorded = {}
+    if directory is not None:
+        try:
+            recorded = json.loads((directory / CONFIG_FILE).read_text()).get("extra", {}).get("options", {})
+        except (OSError, ValueError, AttributeError):
+            recorded = {}  # load_policy reports a broken file with its remedy
+    known = {option.name for option in spec.options}
+    # JSON turned tuples (harvest's tagger) into lists
+    recorded = {name: tuple(value) if isinstance(value, list) else value for name, value in recorded.items() if name in known}
+    return spec.check_options({**recorded, **(given or {})})
+
+
+def check_observations(spec: Any, directory: Path, obs_shape: tuple[int, ...], options: Mapping[str, Any]) -> None:
+    """A saved agent must see the observations these options give; else one line naming the fix."""
+    env, _ = spec.make_env(options)
+    if tuple(env.observation_shape) != tuple(obs_shape):
+        changed = ", ".join(f"{k}={v}" for k, v in options.items())
+        raise WorldagentError(
+            f"{directory} was trained on observations of shape {tuple(obs_shape)}, but {spec.name} with {changed} gives "
+            f"{tuple(env.observation_shape)}; pass the options it trained with (--option NAME=VALUE)."
+        )
+
+
 AGENT_FORMS = (
     "a `worldagent train` run or policy directory, a scripted policy ({scripted}), a .onnx file, a Stable-Baselines3 .zip, or module:function"
 )
@@ -74,8 +103,9 @@ def load_agent(
         return scripted_policy(spec, text, options)
     directory = policy_dir(text)
     if directory is not None:
-        policy = load_policy(directory, env=spec.name, greedy=greedy).policy
-        return policy.replace(source=AgentSource("worldagent", str(directory), file_hash(directory / CONFIG_FILE, directory / PARAMS_FILE)))
+        saved = load_policy(directory, env=spec.name, greedy=greedy)
+        check_observations(spec, directory, saved.obs_shape, spec.check_options(options))
+        return saved.policy.replace(source=AgentSource("worldagent", str(directory), file_hash(directory / CONFIG_FILE, directory / PARAMS_FILE)))
     suffix = Path(text).suffix.lower()
     if suffix in (".onnx", ".zip"):
         env, _ = spec.make_env(options)

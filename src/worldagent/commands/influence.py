@@ -14,7 +14,7 @@ from worldagent.commands.options import (
     algorithm,
     check_counts,
     env_argument,
-    env_options,
+    given_options,
     option_flag,
     stochastic_flag,
 )
@@ -78,7 +78,7 @@ def influence_command(
     selection = parse_selection(select, env)  # before anything slow: a typo costs nothing
     algo = algorithm(env, algo)
     check_counts(seeds=seeds)
-    options = env_options(env, option)
+    options = given_options(env, option)
 
     from rich.console import Console
 

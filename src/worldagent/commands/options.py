@@ -69,6 +69,12 @@ def env_options(env: str, texts: list[str]) -> dict:
     return registry.get(env).parse_options(list(texts))
 
 
+def given_options(env: str, texts: list[str]) -> dict:
+    """Only the options ``--option`` names (parsed, checked): ``experiments.setup`` fills the rest
+    from the agent's own (a saved agent records those it trained with), then the defaults."""
+    return registry.get(env).parse_options(list(texts), fill=False)
+
+
 def check_counts(**counts: int) -> None:
     """Each named count must be at least 1 (one-line error naming the option)."""
     for option, value in counts.items():

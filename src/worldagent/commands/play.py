@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import AGENT_HELP, env_argument, env_options, option_flag
+from worldagent.commands.options import AGENT_HELP, env_argument, given_options, option_flag
 from worldagent.errors import WorldagentError
 
 
@@ -20,7 +20,7 @@ def play_episodes(env: str, agent: str, seed: int, key: int, episodes: int, out:
     import jax
     import numpy as np
 
-    from worldagent.agents.loaders import load_agent
+    from worldagent.agents.loaders import agent_options, load_agent
     from worldagent.envs import registry
     from worldagent.evaluation.trajectories import replay
     from worldagent.files import write_atomically
@@ -33,7 +33,7 @@ def play_episodes(env: str, agent: str, seed: int, key: int, episodes: int, out:
         raise WorldagentError(f"--episodes {episodes}, --seed {seed}: play at least one episode on a non-negative seed.")
     if spec.pictures.episodes is None:
         raise WorldagentError(f"{spec.name} registers no trajectory picture (pictures.episodes); it cannot be drawn here.")
-    parsed = env_options(env, options)
+    parsed = agent_options(spec, agent, given_options(env, options))
     env_obj, params = spec.make_env(parsed)
     policy = load_agent(spec, agent, greedy=greedy, options=parsed)
     world = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[0], spec.generate(np.array([seed], np.int64)))

@@ -213,8 +213,9 @@ class EnvSpec:
             raise WorldagentError(f"{self.name} has no option {unknown[0]!r}; its options: {listed}.")
         return {name: options.get(name, option.default) for name, option in known.items()}
 
-    def parse_options(self, texts: list[str] | tuple[str, ...]) -> dict[str, Any]:
-        """Options from ``NAME=VALUE`` strings (the CLI's ``--option``), parsed and checked."""
+    def parse_options(self, texts: list[str] | tuple[str, ...], fill: bool = True) -> dict[str, Any]:
+        """Options from ``NAME=VALUE`` strings (the CLI's ``--option``), parsed and checked;
+        ``fill=False`` leaves out those not given (a saved agent's own options fill them)."""
         known = {option.name: option for option in self.options}
         options = {}
         for text in texts:
@@ -228,7 +229,7 @@ class EnvSpec:
                 options[name] = known[name].parse(value.strip())
             except ValueError as error:
                 raise WorldagentError(f"--option {text!r}: {error}; {known[name].help}") from None
-        return self.check_options(options)
+        return self.check_options(options) if fill else options
 
     def make_env(self, options: Mapping[str, Any] | None = None) -> tuple[Any, Any]:
         """``(env, params)`` for ``options`` (checked, defaults filled in)."""

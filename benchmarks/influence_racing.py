@@ -4,8 +4,8 @@
     python benchmarks/influence_racing.py --algo ppo --seeds 0 1 --episodes 2000 --eval-worlds 100 --work runs/influence-racing-small
 
 The agent sees what the paper's does (§5.1.1: "its surrounding area, as well as its current
-position and directional speed"): racing's ``rays`` observation, trained with the settings that
-made it lap (``SETTINGS``, ``docs/racing.md``). Steps, each cached under ``--work`` (a killed run
+position and directional speed"): racing's ``rays`` observation, trained with the settings the
+racing spec gives it (``option_overrides``: those that made it lap, ``docs/racing.md``). Steps, each cached under ``--work`` (a killed run
 resumes where it stopped):
 
 1. the generator G(z): ``--generator`` if it holds one, else the paper preset's dataset and VAE
@@ -52,11 +52,7 @@ from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
 
 SPEC = registry.get("racing")
 PAPER = SPEC.presets["paper"]
-OPTIONS = {"observation": "rays", "respawn_speed": 0.5}
-SETTINGS = {  # docs/racing.md: what made each algorithm lap on rays at 10,000 episodes
-    "acktr": {"crash_warmup": 0.5, "quadratic": True, "learning_rate": 1.0},
-    "ppo": {"crash_warmup": 0.5, "quadratic": True},
-}
+OPTIONS = {"observation": "rays"}  # respawn speed 0.5: the rays default
 PAPER_SELECTION = "crash_rate > 0.5"
 FALLBACK_SELECTION = "crash_rate > 0"
 MIN_DISTINCT = 50  # issue 13: the influenced distribution holds at least this many distinct tracks
@@ -80,7 +76,7 @@ def given_agent(work: Path, algo: str, episodes: int, progress: bool) -> Path:
     """The agent whose crashes select the worlds, trained on the procedural pool (resumed if killed)."""
     out = work / f"agent-{algo}"
     if not (out / "policy").exists():
-        config = training_config(SPEC, algo, episodes, **SETTINGS[algo])
+        config = training_config(SPEC, algo, episodes, options=OPTIONS)
         pool = world_distribution(SPEC, "generator", size=PAPER["worlds"], seed=0)
         train(SPEC, algo, config, pool, out, seed=0, options=OPTIONS, progress=progress, resume=True)
     return out
@@ -130,7 +126,7 @@ def steps_per_lap(influence_dir: Path, result: dict) -> dict:
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algo", choices=sorted(SETTINGS), default="acktr", help="the paper's: acktr")
+    parser.add_argument("--algo", choices=SPEC.algorithms, default="acktr", help="the paper's: acktr")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     parser.add_argument("--episodes", type=int, default=PAPER["episodes"], help="training episodes of every agent (paper: 10,000)")
     parser.add_argument("--candidates", type=int, default=PAPER["influence_candidates"])
@@ -153,7 +149,7 @@ def main(argv=None) -> dict:
     enough = reach["random"]["distinct"] + reach["atlas"]["distinct"] >= MIN_DISTINCT  # an upper bound: the two may share tracks
     selection = args.selection if args.selection != "auto" else (PAPER_SELECTION if enough else FALLBACK_SELECTION)
     influence_dir = args.work / f"influence-{args.algo}"
-    config = training_config(SPEC, args.algo, args.episodes, **SETTINGS[args.algo])
+    config = training_config(SPEC, args.algo, args.episodes, options=OPTIONS)
     result = experiments.influence(
         influence_dir,
         setup,
@@ -177,7 +173,7 @@ def main(argv=None) -> dict:
         "command": "python benchmarks/influence_racing.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "algo": args.algo,
         "options": OPTIONS,
-        "settings": SETTINGS[args.algo],
+        "settings": SPEC.option_overrides(args.algo, SPEC.check_options(OPTIONS)),
         "budgets": {
             "episodes": args.episodes,
             "seeds": args.seeds,

@@ -21,7 +21,8 @@ def test_paper_preset_has_the_papers_budgets():
     assert (racing.episodes, harvest.episodes) == (10_000, 5_000)
     assert PAPER.repeats == 8 and racing.random_worlds == harvest.random_worlds == 1_000
     assert PAPER.vae_hidden == (1024, 512)
-    assert (PAPER.algo_of("racing"), PAPER.algo_of("harvest")) == ("ppo", "dqn")  # each env's default algorithm
+    assert (PAPER.algo_of("racing"), PAPER.algo_of("harvest")) == ("acktr", "dqn")  # the paper's algorithms
+    assert PAPER.options_of("racing") == {"observation": "rays"} and QUICK.options_of("racing") == {}  # the paper's racing observation
 
 
 def test_budgets_come_from_the_specs():
@@ -34,10 +35,11 @@ def test_budgets_come_from_the_specs():
 
 def test_options_and_selections_come_from_the_specs():
     assert TINY.phase_config("harvest", "agent")["options"] == {"tagger": (0,)}  # harvest's reproduce_options
-    assert "options" not in TINY.phase_config("racing", "agent")
+    assert TINY.phase_config("racing", "agent")["options"] == {"observation": "rays"}  # the racing budgets' options
+    assert "options" not in QUICK.phase_config("racing", "agent")
     assert TINY.selection("harvest") == registry.get("harvest").selection == "conflict == 0"
     assert QUICK.selection("racing") == "crash_rate > 0"  # the racing budgets override the paper's selection
-    assert TINY.selection("racing") == registry.get("racing").selection
+    assert TINY.selection("racing") == PAPER.selection("racing") != registry.get("racing").selection
 
 
 @pytest.mark.parametrize("name", list(SETTINGS))
@@ -58,11 +60,9 @@ def test_a_budget_change_touches_only_its_phase():
 
 
 def test_algo_overrides_only_the_envs_that_have_it():
-    acktr = TINY.with_algo("acktr")
-    assert (acktr.algo_of("racing"), acktr.algo_of("harvest")) == ("acktr", "dqn")
-    assert acktr.phase_config("racing", "agent")["algo"] == "acktr" and acktr.phase_config("harvest", "agent") == TINY.phase_config(
-        "harvest", "agent"
-    )
+    ppo = TINY.with_algo("ppo")
+    assert (TINY.algo_of("racing"), ppo.algo_of("racing"), ppo.algo_of("harvest")) == ("acktr", "ppo", "dqn")
+    assert ppo.phase_config("racing", "agent")["algo"] == "ppo" and ppo.phase_config("harvest", "agent") == TINY.phase_config("harvest", "agent")
 
 
 def test_bad_names_and_budgets_are_refused_in_one_line():
@@ -72,6 +72,12 @@ def test_bad_names_and_budgets_are_refused_in_one_line():
         TINY.with_algo("sarsa")
     with pytest.raises(WorldagentError, match="episodes"):
         TINY.with_budgets("racing", episodes=0)
+    with pytest.raises(WorldagentError, match="racing trains with ppo, acktr, not 'dqn'"):
+        TINY.with_budgets("racing", algo="dqn")
+    with pytest.raises(WorldagentError, match="racing has no option 'colour'"):
+        TINY.with_budgets("racing", options={"colour": 1})
+    with pytest.raises(WorldagentError, match="influence_search 'bo'; use one of: cmaes, atlas"):
+        TINY.with_budgets("racing", influence_search="bo")
     with pytest.raises(WorldagentError, match="unknown environment 'chess'"):
         resolve_envs("chess", TINY)
     assert resolve_envs("all", TINY) == ["racing", "harvest"] and resolve_envs("harvest", TINY) == ["harvest"]

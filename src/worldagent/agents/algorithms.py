@@ -8,7 +8,7 @@ Every command, reproduce phase and influencing experiment picks its algorithm an
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,7 +49,9 @@ def get_algorithm(name: str) -> Algorithm:
     return ALGORITHMS[name]
 
 
-def training_config(spec: Any, algo: str | None = None, episodes: int | None = None, base: Any = None, **overrides) -> Any:
+def training_config(
+    spec: Any, algo: str | None = None, episodes: int | None = None, base: Any = None, options: Mapping[str, Any] | None = None, **overrides
+) -> Any:
     """The config an env trains ``algo`` with.
 
     Args:
@@ -57,7 +59,8 @@ def training_config(spec: Any, algo: str | None = None, episodes: int | None = N
         algo: one of ``spec.algorithms``; default ``spec.default_algorithm``.
         episodes: the episode budget (PPO/ACKTR ``total_episodes``, DQN ``num_episodes``).
         base: a config to start from (default: the algorithm's defaults with the env's
-            ``spec.algorithm_overrides[algo]``).
+            ``spec.algorithm_overrides[algo]`` and ``spec.option_overrides(algo, options)``).
+        options: the env options the agent trains with (default: the env's defaults).
         **overrides: config fields to set last (unknown ones are refused).
 
     Returns:
@@ -69,7 +72,8 @@ def training_config(spec: Any, algo: str | None = None, episodes: int | None = N
     if algo not in spec.algorithms:
         raise WorldagentError(f"{spec.name} trains with {', '.join(spec.algorithms)}, not {algo}; pick one of those.")
     if base is None:
-        config = algorithm.config_type().replace(**spec.algorithm_overrides.get(algo, {}))
+        tuned = spec.option_overrides(algo, spec.check_options(options)) if spec.option_overrides else {}
+        config = algorithm.config_type().replace(**{**spec.algorithm_overrides.get(algo, {}), **tuned})
     elif isinstance(base, algorithm.config_type):
         config = base
     else:

@@ -43,7 +43,7 @@ def register(app: typer.Typer) -> None:
             raise WorldagentError(f"--episodes {episodes}; train for at least one episode.")
         if worlds == "vae" and generator is None:
             raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
-        config = training_config(spec, algo, episodes=episodes)
+        config = training_config(spec, algo, episodes=episodes, options=options)
         distribution = world_distribution(spec, worlds, generator_dir=generator, progress=not quiet)
         result = run_training(
             spec, algo, config, distribution, out, seed=seed, options=options, progress=not quiet, resume=resume, distribution_spec=worlds

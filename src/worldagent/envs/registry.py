@@ -151,6 +151,9 @@ class EnvSpec:
         scripted: ``name -> ((env, params) -> ScriptedPolicy)``: hand-written agents.
         algorithms: training algorithms that fit this env (first: the default).
         algorithm_overrides: ``algo -> {config field: value}`` this env's settings of an algorithm.
+        option_overrides: ``(algo, options) -> {config field: value}``: settings that depend on
+            the env options, applied after ``algorithm_overrides`` (racing: an agent without the
+            route sensor learns with quadratic inputs and a crash warm-up); None: none.
         presets: ``preset name -> {budget field: value}``: the budgets of ``worldagent reproduce``.
         reproduce_options: the ``make`` options ``worldagent reproduce`` uses (harvest: tagger 0).
         selection: the paper's influencing selection (``"crash_rate > 0.5"``).
@@ -181,6 +184,7 @@ class EnvSpec:
     scripted: Mapping[str, Callable[[Any, Any], ScriptedPolicy]] = field(default_factory=dict)
     algorithms: tuple[str, ...] = ()
     algorithm_overrides: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    option_overrides: Callable[[str, Mapping[str, Any]], Mapping[str, Any]] | None = None
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     reproduce_options: Mapping[str, Any] = field(default_factory=dict)
     selection: str = ""

@@ -272,7 +272,7 @@ def influence(
         raise WorldagentError(f"unknown search {search!r}; use one of: {', '.join(SEARCHES)}.")
     if G.env != spec.name:
         raise WorldagentError(f"the generator makes {G.env} worlds, not {spec.name} worlds; pass a {spec.name} generator.")
-    config = training_config(spec, algo, episodes, base=config)
+    config = training_config(spec, algo, episodes, base=config, options=options)
     counts = {
         "candidates": int(candidates),
         "search_budget": int(search_budget),

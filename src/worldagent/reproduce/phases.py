@@ -72,6 +72,11 @@ class EnvContext:
     def algo(self) -> str:
         return self.preset.algo_of(self.env)
 
+    @property
+    def options(self) -> dict:
+        """The env options of this run's agents (``Preset.options_of``)."""
+        return self.preset.options_of(self.env)
+
     def cached(self, name: str, make: Callable[[], Any]) -> Any:
         if name not in self._cache:
             self._cache[name] = make()
@@ -84,7 +89,7 @@ class EnvContext:
 
         def make():
             generator = load_generator(self.layout.generator_dir, self.layout.dataset_path)[0]
-            options = dict(self.spec.reproduce_options)
+            options = self.options
             return experiments.setup(self.env, str(self.layout.agent_dir), generator, options=options, repeats=self.preset.repeats)
 
         return self.cached("setup", make)
@@ -98,7 +103,7 @@ class EnvContext:
             **({"num_envs": b.train_envs} if b.train_envs else {}),
             **({"learning_starts": b.learning_starts} if b.learning_starts is not None else {}),
         }
-        return training_config(self.spec, self.algo, episodes=episodes, **overrides)
+        return training_config(self.spec, self.algo, episodes=episodes, options=self.options, **overrides)
 
     def store(self):
         from worldagent.store import RunStore
@@ -188,7 +193,7 @@ def agent_phase(ctx: EnvContext) -> dict:
         world_distribution(spec, str(layout.dataset_path)),
         layout.agent_dir,
         seed=ctx.seed,
-        options=dict(spec.reproduce_options),
+        options=ctx.options,
         progress=ctx.progress,
         resume=True,
         distribution_spec=layout.rel(layout.dataset_path),
@@ -199,7 +204,7 @@ def agent_phase(ctx: EnvContext) -> dict:
         "agent": layout.rel(layout.agent_dir / "policy"),
         "curve": layout.rel(layout.agent_dir / "curve.png"),
         "algo": ctx.algo,
-        **({"options": dict(spec.reproduce_options)} if spec.reproduce_options else {}),
+        **({"options": ctx.options} if ctx.options else {}),
         "episodes": result.episodes,
         "env_steps": result.env_steps,
         "train_s": round(result.wall_seconds, 2),
@@ -317,6 +322,7 @@ def influence_phase(ctx: EnvContext) -> dict:
         seeds=tuple(budgets.influence_seeds),
         candidates=budgets.influence_candidates,
         search_budget=budgets.influence_search_budget,
+        search=budgets.influence_search,
         eval_worlds=budgets.influence_eval_worlds,
         config=ctx.train_config(budgets.influence_episodes),
         seed=ctx.seed,

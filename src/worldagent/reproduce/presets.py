@@ -25,6 +25,7 @@ import dataclasses
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
@@ -66,15 +67,22 @@ class EnvBudgets:
         influence_episodes: training episodes of each default and influenced agent.
         influence_eval_worlds: random worlds both agents are evaluated on (ours).
         influence_seeds: training seeds of the influencing experiment.
-        influence_search_budget: extra CMA-ES evaluations searching for selectable worlds (ours).
+        influence_search_budget: extra evaluations searching for selectable worlds (ours).
+        influence_search: that search: "cmaes" (the paper's optimiser) or "atlas" (CMA-ME, which
+            collects many distinct worlds instead of revisiting one).
+        options: env options of this preset's agents, over ``spec.reproduce_options`` (racing's
+            paper preset: the paper's observation, ``observation="rays"``).
+        algo: this env's training algorithm at this preset ("": ``spec.default_algorithm``;
+            ``reproduce --algo`` overrides both).
         influence_selection: the property of the influenced training worlds ("": the paper's,
-            ``spec.selection``). Our racing agents crash ~10× less often than the paper's (crash
-            rate 0.01–0.07 against 0.11), so worlds with a crash rate above 0.5 are rare: for
-            the PPO agent 2 of 1,000 random worlds; a 2,100-world CMA-ES search found 303 more
-            but only 9 distinct tracks, and agents trained on those failed (3 seeds: crash rate
-            0.56, no laps). The racing presets therefore select the worlds where the agent
-            crashed at all ("crash_rate > 0": 234 distinct tracks of 1,000), which reproduces
-            the paper's effect (3 seeds: crash rate 0.073 → 0.043).
+            ``spec.selection``). Our racing agents crash 5–20× less often than the paper's (crash
+            rate 0.005–0.07 against 0.11), so worlds with a crash rate above 0.5 are rare or
+            absent: for the route PPO agent 2 of 1,000 random worlds, and a 2,100-world CMA-ES
+            search found only 9 distinct tracks (agents trained on those failed: 3 seeds, crash
+            rate 0.56, no laps); for the rays ACKTR agent none of 1,000 random worlds and none of
+            a 2,100-world crash-maximising atlas (its worst: 4 crashes in 8;
+            ``benchmarks/results/influence-racing.json``). The racing presets therefore select
+            the worlds where the agent crashed at all (``"crash_rate > 0"``).
     """
 
     worlds: int
@@ -89,12 +97,15 @@ class EnvBudgets:
     influence_eval_worlds: int
     influence_seeds: tuple[int, ...]
     influence_search_budget: int = 0
+    influence_search: str = "cmaes"
     influence_selection: str = ""
     bo_budget: int = 0
     train_envs: int = 0
     learning_starts: int | None = None
     atlas_budget: int = 0
     failure_worlds: int = 0
+    options: Mapping[str, Any] = field(default_factory=dict)
+    algo: str = ""
 
 
 @dataclass(frozen=True)
@@ -110,8 +121,7 @@ class Preset:
         vae_hidden: encoder widths; the decoder is the transpose (paper §5.2.1: 1024, 512).
         vae_batch_size: VAE minibatch.
         algo: the training algorithm for every env whose ``spec.algorithms`` has it (``--algo``);
-            None: each env's ``spec.default_algorithm`` (racing PPO: at 10,000 episodes on G(z)
-            it learnt to lap for 3 seeds of 3, the paper's ACKTR for 1 of 3; harvest DQN).
+            None: each env's ``EnvBudgets.algo``, else its ``spec.default_algorithm``.
     """
 
     name: str
@@ -137,6 +147,16 @@ class Preset:
             ]
             if small:
                 raise WorldagentError(f"preset {self.name!r}: {env} budgets {', '.join(small)} must be at least 1.")
+            from worldagent.influence.experiment import SEARCHES
+
+            if budgets.influence_search not in SEARCHES:
+                raise WorldagentError(
+                    f"preset {self.name!r}: {env} influence_search {budgets.influence_search!r}; use one of: {', '.join(SEARCHES)}."
+                )
+            spec = registry.get(env)
+            spec.check_options(budgets.options)  # an unknown option is refused with the known ones
+            if budgets.algo and budgets.algo not in spec.algorithms:
+                raise WorldagentError(f"preset {self.name!r}: {env} trains with {', '.join(spec.algorithms)}, not {budgets.algo!r}.")
 
     def budgets(self, env: str) -> EnvBudgets:
         """The budgets of ``env``."""
@@ -163,7 +183,7 @@ class Preset:
     def phase_config(self, env: str, phase: str) -> dict:
         """The settings phase ``phase`` of ``env`` depends on (compared when a run resumes)."""
         b = self.budgets(env)
-        options = dict(registry.get(env).reproduce_options)
+        options = self.options_of(env)
         table = {
             "dataset": {"worlds": b.worlds},
             "generator": {"epochs": b.vae_epochs, "hidden": list(self.vae_hidden), "batch_size": self.vae_batch_size},
@@ -190,6 +210,7 @@ class Preset:
                 "eval_worlds": b.influence_eval_worlds,
                 "seeds": list(b.influence_seeds),
                 "search_budget": b.influence_search_budget,
+                **({"search": b.influence_search} if b.influence_search != "cmaes" else {}),  # runs made before the field still match
                 "repeats": self.repeats,
                 "algo": self.algo_of(env),
             },
@@ -209,9 +230,13 @@ class Preset:
         return self.budgets(env).influence_selection or registry.get(env).selection
 
     def algo_of(self, env: str) -> str:
-        """The training algorithm of ``env``'s agents: ``algo`` where the env has it, else its default."""
+        """The training algorithm of ``env``'s agents: ``algo`` where the env has it, else the budgets', else the env's default."""
         spec = registry.get(env)
-        return self.algo if self.algo in spec.algorithms else spec.default_algorithm
+        return self.algo if self.algo in spec.algorithms else (self.budgets(env).algo or spec.default_algorithm)
+
+    def options_of(self, env: str) -> dict[str, Any]:
+        """The env options of ``env``'s agents: ``spec.reproduce_options`` with the budgets' on top."""
+        return {**registry.get(env).reproduce_options, **self.budgets(env).options}
 
 
 # name -> (description, settings other than budgets); budgets come from each EnvSpec.presets[name]

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from worldagent.agents.algorithms import training_config
 from worldagent.envs import registry
 from worldagent.envs.racing.env import RAY_DIRECTIONS, ParticleRacing, RacingParams, road_here, road_pixels, road_rays
 from worldagent.envs.racing.tracks import rasterize
@@ -101,12 +102,24 @@ def test_observations_equal_under_jit_and_vmap(tracks, env):
     np.testing.assert_array_equal(jax.jit(observe)(first(worlds, 1), positions[1], velocities[1]), eager[1])
 
 
+def test_the_observation_picks_the_training_settings_that_made_it_lap():
+    for algo in ("ppo", "acktr"):
+        route, rays = (training_config("racing", algo, options={"observation": obs}) for obs in ("route", "rays"))
+        assert route == training_config("racing", algo) and not route.quadratic and route.crash_warmup == 0.0
+        assert rays.quadratic and rays.crash_warmup == 0.5
+        assert training_config("racing", algo, options={"observation": "rays"}, crash_warmup=0.0).crash_warmup == 0.0  # overrides win
+    assert training_config("racing", "acktr", options={"observation": "rays"}).learning_rate == 1.0
+
+
 def test_spec_option_picks_the_observation():
     spec = registry.get("racing")
     assert spec.make_env()[0].observation == "route"
     env, params = spec.make_env(spec.parse_options(["observation=surroundings", "reach=96", "respawn_speed=0.5"]))
     assert env.observation == "surroundings" and env.reach == 96 and env.window == 16 and params.respawn_speed == 0.5
     assert spec.make_env({"observation": "rays"})[0].observation_shape == (RAY_DIRECTIONS + 10,)
+    # without the route a respawned agent restarts moving (at rest it learnt to park), unless told otherwise
+    assert spec.make_env()[1].respawn_speed == 0.0 and spec.make_env({"observation": "rays"})[1].respawn_speed == 0.5
+    assert spec.make_env({"observation": "rays", "respawn_speed": 0.0})[1].respawn_speed == 0.0
     with pytest.raises(WorldagentError, match="fraction"):
         spec.parse_options(["respawn_speed=2"])
     with pytest.raises(WorldagentError, match="observation"):

@@ -233,6 +233,7 @@ SPEC = register(
                 compare_budget=0,
                 compare_seeds=(0,),
                 influence_candidates=8,
+                influence_search_budget=42,  # 8 random maps held no conflict == 0 map for the 4-episode agents
                 influence_episodes=4,
                 influence_eval_worlds=4,
                 influence_seeds=(0,),

@@ -13,7 +13,9 @@ resumes where it stopped):
 2. the given agent: ``--algo`` trained ``--episodes`` on the procedural dataset pool (paper §5.3);
 3. the paper's selection, ``crash_rate > 0.5``: how many *distinct* tracks the given agent
    crashes on in more than half of its episodes, among ``--candidates`` random worlds and in a
-   crash-maximising CMA-ME atlas of ``--atlas-budget`` worlds;
+   crash-maximising CMA-ME atlas of ``--atlas-budget`` worlds; and a census of every dataset
+   track (``repeats`` episodes each): racing's repair maps every G(z) to its nearest dataset
+   track, so the census bounds how many distinct tracks any search can select;
 4. ``experiments.influence`` with ``--selection``; ``auto`` takes the paper's when step 3 found
    at least ``MIN_DISTINCT`` tracks, else ``crash_rate > 0`` (every track it crashed on at all);
    candidates are random worlds plus an atlas search (``--search-budget``) toward the selection;
@@ -32,6 +34,7 @@ import sys
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -42,12 +45,13 @@ from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
+from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
 from worldagent.influence.statistics import episode_values, mean_and_ci  # noqa: E402
 from worldagent.search.atlas import distinct_count  # noqa: E402
 from worldagent.store import RunStore  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
-from worldagent.worlds.generator import build_generator, save_generator  # noqa: E402
+from worldagent.worlds.generator import build_generator, load_generator, save_generator  # noqa: E402
 from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
 
 SPEC = registry.get("racing")
@@ -111,6 +115,19 @@ def paper_selection_reach(work: Path, setup, candidates: int, atlas_budget: int,
         }
 
 
+def dataset_census(gen_dir: Path, setup, repeats: int) -> dict:
+    """How many of the generator's dataset tracks (G(z)'s whole range after repair) meet each crash-rate threshold."""
+    data = load_generator(gen_dir)[2]
+    crashed = evaluate(setup.env, setup.policy, data.worlds, repeats, jax.random.key(0), setup.params)["crashed"]
+    rate = np.asarray(crashed, np.float64).mean(axis=1)
+    return {
+        "tracks": len(rate),
+        "repeats": repeats,
+        "crash_rate_mean": round(float(rate.mean()), 4),
+        "tracks_with_crash_rate_above": {str(t): int((rate > t).sum()) for t in (0.0, 0.125, 0.25, 0.375, 0.5)},
+    }
+
+
 def steps_per_lap(influence_dir: Path, result: dict) -> dict:
     """{label: {seed: mean steps of the lapped evaluation episodes}}: lower is faster."""
     counts = result["config"]
@@ -146,6 +163,7 @@ def main(argv=None) -> dict:
     agent_dir = given_agent(args.work, args.algo, args.episodes, progress)
     setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=OPTIONS)
     reach = paper_selection_reach(args.work, setup, args.candidates, args.atlas_budget, progress)
+    reach["dataset_census"] = dataset_census(gen_dir, setup, setup.repeats)
     enough = reach["random"]["distinct"] + reach["atlas"]["distinct"] >= MIN_DISTINCT  # an upper bound: the two may share tracks
     selection = args.selection if args.selection != "auto" else (PAPER_SELECTION if enough else FALLBACK_SELECTION)
     influence_dir = args.work / f"influence-{args.algo}"

@@ -33,6 +33,7 @@ count (0.05 for a smoke run). Writes ``benchmarks/results/failure-rate.json`` wi
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -294,28 +295,40 @@ def main() -> None:
     args = parser.parse_args()
     start, results = time.perf_counter(), {}
     for env in args.envs:
-        results[env] = run_env(env, args)
+        began = time.perf_counter()
+        results[env] = {**run_env(env, args), "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "seconds": round(time.perf_counter() - began, 1)}
         if not args.brute_force_only:  # written after each env, so a late failure keeps the finished ones
             write_results(args, results, time.perf_counter() - start)
 
 
-def write_results(args, results: dict, seconds: float) -> None:
-    """``benchmarks/results/failure-rate.json``: the machine, the settings, the proposals tried and each env's events."""
-    import json
+def kept_results(settings: dict) -> dict:
+    """The recorded envs this run does not redo, where they were measured with the same method settings."""
+    path = RESULTS / "failure-rate.json"
+    old = json.loads(path.read_text()) if path.exists() else {}
+    same = all(old.get("settings", {}).get(name) == settings[name] for name in ("importance", "batch", "min_hits", "width", "is_cap", "seed"))
+    return {env: {"when": old["when"], **old[env]} for env in ENVS if env in old} if same else {}
 
+
+def write_results(args, results: dict, seconds: float) -> None:
+    """``benchmarks/results/failure-rate.json``: the machine, the settings, the proposals tried and each env's events (an env
+    not rerun keeps its recorded entry while the method's settings are unchanged)."""
+    settings = {
+        **{key: str(value) if isinstance(value, Path) else value for key, value in vars(args).items()},
+        "envs": {env: ENVS[env] for env in args.envs},
+        "importance": fr.ImportanceConfig().__dict__,
+        "batch": {"mc": 1000, "is": args.is_batch},
+        "min_hits": fr.MIN_HITS,
+    }
+    kept = {env: entry for env, entry in kept_results(settings).items() if env not in results}
+    settings["envs"] = {env: ENVS[env] for env in (*kept, *results)}
     payload = {
         "benchmark": "failure_rate",
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "machine": describe_machine(),
-        "settings": {
-            **{key: str(value) if isinstance(value, Path) else value for key, value in vars(args).items()},
-            "envs": {env: ENVS[env] for env in args.envs},
-            "importance": fr.ImportanceConfig().__dict__,
-            "batch": {"mc": 1000, "is": args.is_batch},
-            "min_hits": fr.MIN_HITS,
-        },
+        "settings": settings,
         "seconds": round(seconds, 1),
         "tried": TRIED,
+        **kept,
         **results,
     }
     print("->", write_text(RESULTS / "failure-rate.json", json.dumps(payload, indent=2) + "\n"), flush=True)

@@ -102,41 +102,11 @@ def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_
 
 def test_importance_sampling_learns_the_prior_mean_on_the_event():
     spend = fr._Spender(toy, 0)
-    proposal, best, pool = fr.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig(bandwidth=None))
+    proposal, best, hits = fr.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig())
     conditional_mean = NormalDist().pdf(THRESHOLD) / P_TOY  # E[z0 | z0 > 3] = 3.28
     mean = proposal.shares @ proposal.centres  # one region: BIC may split it, but the mixture's mean stays there
     assert mean[0] == pytest.approx(conditional_mean, abs=0.3) and np.all(np.abs(mean[1:]) < 0.4)
-    assert best > 0 and spend.worlds <= 10 * 500 and len(pool.z) == spend.worlds  # every world drawn is pooled
-
-
-def test_search_worlds_count_in_the_estimate_weighted_by_every_proposal_used():
-    """One world after the search: the estimate is the search's own worlds. The prior's round hits z0 > 3 about
-    once in 1 / P worlds; weighted p/q by its own proposal (q = p) each such hit would count 1, ~1000 times the
-    weight the later rounds give the same place, and widen the interval or miss P."""
-    config = fr.ImportanceConfig(round_worlds=500, max_rounds=6, search_hits=None, bandwidth=None)
-    estimates = [fr.importance_sampling(toy, 10, 1, seed=seed, config=config) for seed in range(6)]
-    assert all(e.search_worlds == e.worlds - 1 and e.hits > 50 for e in estimates)  # the rounds' hits, pooled
-    assert sum(e.low <= P_TOY <= e.high for e in estimates) >= 5
-    assert np.median([e.relative_half_width for e in estimates]) < 0.3
-
-
-def test_pooled_weights_are_those_of_the_average_proposal_and_skip_a_worlds_own_kernel():
-    rng = np.random.default_rng(0)
-    prior, shifted = fr.Proposal.shift(np.zeros(10)), fr.Proposal.shift(np.r_[3.3, np.zeros(9)])
-    pool = fr.Pool.empty(10)
-    for proposal, n in ((prior, 20_000), (shifted, 60_000)):  # fixed proposals: the mixture's weights are unbiased
-        z = fr.sample_mixture(rng, proposal, 0.1, n)
-        pool = pool.add(z, z[:, 0] - THRESHOLD, z[:, 0] > THRESHOLD, proposal)
-    weights = pool.weights(0.1)
-    average = fr.Proposal(np.vstack([prior.centres, shifted.centres]), np.array([0.25, 0.75]), np.ones(2))
-    assert weights == pytest.approx(fr.importance_weights(pool.z, average, 0.1), rel=1e-9)
-    assert np.mean(weights * pool.event) == pytest.approx(P_TOY, rel=0.05)
-    own = np.concatenate([fr.importance_weights(pool.z[:20_000], prior, 0.1), fr.importance_weights(pool.z[20_000:], shifted, 0.1)])
-    assert np.max(own * pool.event) == 1.0 and np.max(weights * pool.event) < 0.05  # the prior's hits, reweighted
-    kernels = fr.around_hits(pool.z[pool.event][:3], np.ones(3), 0.7, rng)
-    grown = pool.add(pool.z[:0], np.zeros(0), np.zeros(0, bool), kernels)  # kernels on three hits, no world drawn
-    event = np.flatnonzero(pool.event)[:3]
-    assert grown.weights(0.1)[event] == pytest.approx(weights[event], rel=1e-6)  # each hit's own kernel left out
+    assert best > 0 and spend.worlds <= 10 * 500
 
 
 def two_sided(z: np.ndarray, seeds: np.ndarray) -> fr.Scored:
@@ -148,18 +118,18 @@ P_TWO = 2 * (1 - NormalDist().cdf(3.2))
 
 
 def test_a_mixture_covers_two_regions_where_a_single_mean_shift_fails():
-    single = fr.ImportanceConfig(components=1, bandwidth=None)  # shifted priors only: no kernels
+    single = fr.ImportanceConfig(components=1)
     shift, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, single)
-    mixture, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, fr.ImportanceConfig(bandwidth=None))
+    mixture, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, fr.ImportanceConfig())
     assert len(shift.shares) == 1 and abs(shift.centres[0, 0]) > 2.5  # one side only: the other is left to the prior
     assert sorted(np.sign(mixture.centres[:, 0])) == [-1, 1] and np.all(np.abs(mixture.centres[:, 0]) > 2.5)
     assert np.all(mixture.shares > 0.25)
     seeds = range(8)
     shifted = [fr.importance_sampling(two_sided, 10, 2000, seed=seed, config=single) for seed in seeds]
     mixed = [fr.importance_sampling(two_sided, 10, 2000, seed=seed) for seed in seeds]
+    assert sum(e.low <= P_TWO <= e.high for e in shifted) <= 5  # the prior's share finds the far side too rarely
+    assert all(e.low <= P_TWO <= e.high for e in mixed)
     width = np.median([e.relative_half_width for e in mixed])  # one seed's noisy centres may widen its interval
-    assert np.median([e.relative_half_width for e in shifted]) > 2 * width  # the far side's hits weigh 1/α: wide intervals
-    assert sum(e.low <= P_TWO <= e.high for e in mixed) >= 7  # the pooled mean is consistent, a few % low at this budget
     assert 10 * max(e.worlds for e in mixed) <= Z95**2 * (1 - P_TWO) / (P_TWO * width**2)
 
 
@@ -223,7 +193,7 @@ def test_an_event_that_never_occurs_is_refused_by_importance_sampling():
     never = lambda z, s: fr.Scored(-np.abs(z[:, 0]) - 1, np.zeros(len(z), bool), len(z))  # |z0| < -1: impossible
     with pytest.raises(WorldagentError) as error:
         fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(round_worlds=100, max_rounds=3))
-    assert "never occurred in the 800 worlds sampled" in one_line(error) and "check the thresholds" in str(error.value)
+    assert "never occurred in the 500 worlds sampled" in one_line(error) and "check the thresholds" in str(error.value)
     nothing = fr.monte_carlo(never, 10, 500)  # Monte Carlo's answer is an upper bound
     assert (nothing.estimate, nothing.low, nothing.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 500)))
 

@@ -15,71 +15,59 @@ closed-form toy (event ``z[0] > 3``) tests them without any environment:
      past its thresholds a world is; > 0 inside), lowers the bar to the top ``elite_fraction``
      (never past the event itself), and fits the mixture to the elites weighted by p/q: the
      cross-entropy update in this family is weighted EM, run for 1 to ``components``
-     components and kept at the lowest BIC. With ``bandwidth``, the next round draws from that
-     mixture (share ``wide_share``) and kernels N(z_i, h² I) around every world so far past the
-     bar: where the event is a union of small cells (a generator that repairs to its dataset)
-     shifted priors barely climb (racing: 0-5 hits a round of 500 at p ≈ 1e-3), kernels do.
+     components and kept at the lowest BIC.
   2. *Sampling*, in batches from the defensive mixture q = α N(0, I) + (1 − α) g, which keeps
-     every weight ≤ 1/α. Before each batch, g is refitted: ``wide_share`` of the search's
-     mixture plus N(z_i, h² I) kernels (h = ``bandwidth``) around every event world z_i found so
-     far, shares ∝ its weight: a kernel estimate of the prior on the event that grows as regions
-     are found (``analysis.proposals`` says why these families).
+     every weight w = p/q ≤ 1/α; P = mean(w · 1[event]) over all batches. Before each batch, g
+     is refitted: ``wide_share`` of the search's mixture plus N(z_i, h² I) kernels (h =
+     ``bandwidth``) around every event world z_i found so far, shares ∝ its weight: a kernel
+     estimate of the prior on the event that grows as regions are found. Each batch is unbiased
+     given the ones before, so the mean is unbiased; its interval treats the terms as
+     independent. The search's worlds are spent, counted, and not in the mean.
 
-  Every world drawn, the search's included, is in the estimate: P = mean(w · 1[event]) with w =
-  p / q̄, q̄ the average of all the proposals used, each weighted by its worlds (``Pool.weights``,
-  deterministic-mixture weights). Why not each world's own p/q_r: the search's first rounds
-  are close to the prior, whose rare hits would weigh 1/P times the rest and widen the interval
-  more than their worlds narrow it; under q̄ such a hit gets the weight the later proposals give
-  it. The price: proposals fitted after a world was drawn enter its weight, so the mean is
-  consistent, not exactly unbiased (as the stopping rule already makes any of these means): on
-  the toys, 20 seeds of 2,000 worlds after the search, mean estimates 0.95-0.97 P. The
-  interval treats the terms as independent. The search stops early once ``search_hits`` event
-  worlds have been found (kernels need only a few hits to grow from), and sampling stops as
-  soon as the pooled interval meets ``target_width``.
+  Why a mixture: an event is often several regions far apart in latent space (distinct tracks
+  or maps). A single mean shift moves toward one of them, or toward their average where none
+  lies, and leaves the others to the prior's share α: on the toy |z0| > 3.2 its interval covered
+  P in 9 of 20 seeds, the mixture's in 20 of 20 (``tests``). Why kernels after the search: a
+  generator that repairs to its dataset's worlds makes the event a union of small cells (one per
+  track, per-coordinate spread ~0.5), where a shifted prior of scale 1 puts a few percent of its
+  draws; kernels of bandwidth 0.7 around the hits put most of them there (racing, p ≈ 1e-4: 7-15x
+  fewer worlds than Monte Carlo instead of 3-4x; benchmarks/results/failure-rate.json,
+  docs/failure-rate.md). Why not narrower, or fitted, scales: in 10 dimensions a component
+  narrower than the event's extent makes log-weights vary like a χ² sum over the coordinates;
+  components with fitted scales (floor 0.3-0.5) locked onto one or two cells and their intervals
+  missed P by 2-20x; a fitted diagonal scale covered 1 − Φ(3) on the toy z0 > 3 in ~55% of 40
+  seeds against 97% for the shifted prior.
 
 The estimator's g-th call of ``evaluate`` is generation g, its worlds played with
-``evaluation_seed(seed, g, slot)``; ``StoredEvaluate`` (``analysis.failure_rate_store``) keeps
-each estimate as one store campaign and resumes it.
+``evaluation_seed(seed, g, slot)`` as in a campaign. ``StoredEvaluate`` makes ``evaluate`` from
+an agent's evaluator and a run store: each estimate is one store campaign (``campaign_name``)
+whose generations are those calls (for importance sampling, the search's rounds first). A rerun
+replays the stored generations (their latents must match) and evaluates only what is missing,
+so a killed run loses nothing. One campaign per estimate, rather than one per search round,
+keeps the store's campaigns readable and resuming a single lookup.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from statistics import NormalDist
 from typing import Any
 
 import numpy as np
+from scipy.special import logsumexp
 
-from worldagent.analysis.failure_rate_search import ImportanceConfig, _check_count, elites, learn_proposal
-from worldagent.analysis.failure_rate_store import StoredEvaluate, campaign_name
-from worldagent.analysis.proposals import (
-    MAX_CENTRES,
-    Pool,
-    Proposal,
-    around_hits,
-    blend,
-    component_logs,
-    effective_sample_size,
-    fit_mixture,
-    importance_weights,
-    log_mixture,
-    sample_mixture,
-    weighted_em,
-)
 from worldagent.errors import WorldagentError
-from worldagent.search.campaign import evaluation_seed
-
-__all__ = [  # the split-off modules' names stay importable from here
-    "MAX_CENTRES", "ImportanceConfig", "Pool", "Proposal", "StoredEvaluate", "around_hits", "blend", "campaign_name",
-    "component_logs", "effective_sample_size", "elites", "fit_mixture", "importance_weights", "learn_proposal",
-    "log_mixture", "sample_mixture", "weighted_em",
-]  # fmt: skip
+from worldagent.evaluation.backends import LocalBackend, split
+from worldagent.search.campaign import REPLAY_TOLERANCE, evaluation_seed
+from worldagent.store import Campaign, RunStore
 
 METHODS = ("mc", "is")
 BATCH = 1000  # worlds per call of evaluate (a generation of the store campaign)
 MC_STREAM, IS_STREAM = 2, 3  # latent streams default_rng([seed, stream]): not random search's (1)
 MIN_HITS = 10  # events seen before a target width may stop sampling (the intervals are poor below)
+MAX_CENTRES = 1000  # components of the proposal around event worlds (its cost: worlds x centres x dim)
 
 
 @dataclass(frozen=True)
@@ -137,6 +125,83 @@ class Estimate:
         return {**asdict(self), "relative_half_width": self.relative_half_width}
 
 
+@dataclass(frozen=True)
+class ImportanceConfig:
+    """Settings of ``importance_sampling``.
+
+    Attributes:
+        round_worlds: worlds per cross-entropy round.
+        max_rounds: rounds at most (the search stops once the elites are all in the event).
+        elite_fraction: the top fraction of a round the proposal is fitted to.
+        prior_weight: α, the prior's share of the mixture (weights ≤ 1/α).
+        components: shifted priors in the search's proposal at most (1: a single mean shift);
+            the number is chosen per round by BIC on the weighted elites.
+        bandwidth: after the search, the proposal is N(z_i, bandwidth² I) around every event
+            world z_i found so far, weighted by p/q, refitted after each batch (at most 1; None:
+            keep the search's mixture of shifted priors).
+        wide_share: the search's mixture's share of g beside the kernels: it keeps sampling around
+            the regions the search found, where kernels may not reach yet.
+    """
+
+    round_worlds: int = 500
+    max_rounds: int = 10
+    elite_fraction: float = 0.1
+    prior_weight: float = 0.1
+    components: int = 8
+    bandwidth: float | None = 0.7
+    wide_share: float = 0.3
+
+    def validate(self) -> None:
+        _check_count("round_worlds", self.round_worlds)
+        _check_count("max_rounds", self.max_rounds)
+        _check_count("components", self.components)
+        if not 0 <= self.wide_share < 1:
+            raise WorldagentError(f"wide_share={self.wide_share}; pass a fraction in [0, 1).")
+        for name in ("elite_fraction", "prior_weight"):
+            if not 0 < getattr(self, name) < 1:
+                raise WorldagentError(f"{name}={getattr(self, name)}; pass a fraction between 0 and 1.")
+        if self.bandwidth is not None and not 0 < self.bandwidth <= 1:
+            raise WorldagentError(f"bandwidth={self.bandwidth}; pass a standard deviation in (0, 1], or None for the search's mixture.")
+        if self.round_worlds * self.elite_fraction < 2:
+            raise WorldagentError(f"{self.round_worlds} worlds per round keep fewer than 2 elites; raise round_worlds or elite_fraction.")
+
+
+@dataclass(frozen=True)
+class Hits:
+    """Event worlds found so far: z f64[h, dim] and their weights p/q f64[h] under the proposal that drew them."""
+
+    z: np.ndarray
+    weights: np.ndarray
+
+    def add(self, z: np.ndarray, weights: np.ndarray) -> Hits:
+        return Hits(np.vstack([self.z, z]), np.concatenate([self.weights, weights]))
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """g = Σ_k share_k N(centre_k, scale_k² I) over latents.
+
+    Attributes:
+        centres: f64[k, dim].
+        shares: f64[k], summing to 1.
+        scales: f64[k], the components' standard deviations.
+    """
+
+    centres: np.ndarray
+    shares: np.ndarray
+    scales: np.ndarray
+
+    @classmethod
+    def shift(cls, mean: np.ndarray) -> Proposal:
+        """The prior shifted to ``mean`` f64[dim]: one component of scale 1."""
+        return cls(np.asarray(mean, np.float64)[None, :], np.ones(1), np.ones(1))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Proposal) and all(
+            np.array_equal(getattr(self, name), getattr(other, name)) for name in ("centres", "shares", "scales")
+        )
+
+
 # -- intervals -------------------------------------------------------------------------------------
 
 
@@ -171,6 +236,13 @@ def weighted_interval(terms: np.ndarray, confidence: float = 0.95) -> tuple[floa
     error = float(terms.std(ddof=1) / np.sqrt(len(terms))) if len(terms) > 1 else float("inf")
     spread = NormalDist().inv_cdf(1 - (1 - confidence) / 2) * error
     return mean, max(0.0, mean - spread), min(1.0, mean + spread)
+
+
+def effective_sample_size(weights: np.ndarray) -> float:
+    """(Σw)² / Σw² of weights f64[n] (Kish); 0 when all are 0."""
+    weights = np.asarray(weights, np.float64)
+    total = float(np.sum(weights**2))
+    return float(np.sum(weights) ** 2 / total) if total > 0 else 0.0
 
 
 # -- the event -------------------------------------------------------------------------------------
@@ -264,34 +336,183 @@ def importance_sampling(
     check_budget(worlds, target_width, config, dim=dim, batch=batch, confidence=confidence)
     rng = np.random.default_rng([seed, IS_STREAM])
     spend = _Spender(evaluate, seed)
-
-    def narrow(pool: Pool, weights: np.ndarray) -> bool:
-        terms = weights * pool.event
-        return _narrow_enough(int(pool.event.sum()), weighted_interval(terms, confidence)[1:], float(terms.mean()), target_width)
-
-    wide, best, pool = learn_proposal(spend, rng, dim, config, narrow)
-    search_worlds = spend.worlds
-    while (left := worlds - (spend.worlds - search_worlds)) > 0:
-        weights = pool.weights(config.prior_weight)
-        if narrow(pool, weights):
-            break
-        proposal = wide
-        if config.bandwidth is not None and pool.event.sum() >= 2:
-            proposal = blend(wide, around_hits(pool.z[pool.event], weights[pool.event], config.bandwidth, rng), config.wide_share)
-        # batches grow by 1/16 of the pool: each refit weighs every pooled world, so their total cost stays ~linear
-        z = sample_mixture(rng, proposal, config.prior_weight, min(max(batch, spend.worlds // 16), left))
+    proposal, best, hits = learn_proposal(spend, rng, dim, config)
+    wide, search_worlds = proposal, spend.worlds
+    weights, events = [], []
+    while spend.worlds - search_worlds < worlds:
+        if config.bandwidth is not None and len(hits.weights) >= 2:  # each batch is unbiased given the ones before
+            proposal = blend(wide, around_hits(hits.z, hits.weights, config.bandwidth, rng), config.wide_share)
+        z = sample_mixture(rng, proposal, config.prior_weight, min(batch, worlds - (spend.worlds - search_worlds)))
         scored = spend(z)
-        pool, best = pool.add(z, scored.margin, scored.event, proposal), max(best, float(np.max(scored.margin)))
-    if not pool.event.any():
+        weights.append(importance_weights(z, proposal, config.prior_weight))
+        events.append(scored.event)
+        hits = hits.add(z[scored.event], weights[-1][scored.event])
+        best = max(best, float(np.max(scored.margin)))
+        terms = np.concatenate(weights) * np.concatenate(events)
+        if _narrow_enough(int(np.sum(np.concatenate(events))), weighted_interval(terms, confidence)[1:], float(terms.mean()), target_width):
+            break
+    weight, event = np.concatenate(weights), np.concatenate(events)
+    if not event.any():
         hint = f"the closest came within {-best:.3g} of it: check the thresholds, or search longer (more rounds or worlds per round)"
         hint = "sample more worlds" if best >= 0 else hint
-        raise WorldagentError(f"the event never occurred in the {len(pool.event)} worlds sampled for importance sampling ({hint}).")
-    weight = pool.weights(config.prior_weight)
-    estimate, low, high = weighted_interval(weight * pool.event, confidence)
+        raise WorldagentError(f"the event never occurred in the {len(event)} worlds sampled for importance sampling ({hint}).")
+    estimate, low, high = weighted_interval(weight * event, confidence)
     return Estimate(
-        "is", estimate, low, high, spend.worlds, spend.episodes, int(pool.event.sum()), confidence, search_worlds,
-        effective_sample_size(weight), effective_sample_size(weight * pool.event),
+        "is", estimate, low, high, spend.worlds, spend.episodes, int(event.sum()), confidence, search_worlds,
+        effective_sample_size(weight), effective_sample_size(weight * event),
     )  # fmt: skip
+
+
+def learn_proposal(
+    spend: Callable[[np.ndarray], Scored], rng: np.random.Generator, dim: int, config: ImportanceConfig
+) -> tuple[Proposal, float, Hits]:
+    """The cross-entropy method: (the proposal, the best margin seen, the event worlds found); ``spend(z) -> Scored``
+    evaluates."""
+    proposal, best, hits = Proposal.shift(np.zeros(dim)), -np.inf, Hits(np.zeros((0, dim)), np.zeros(0))
+    for _ in range(config.max_rounds):
+        z = sample_mixture(rng, proposal, config.prior_weight, config.round_worlds)
+        scored = spend(z)
+        finite = scored.margin[np.isfinite(scored.margin)]
+        if finite.size == 0:
+            raise WorldagentError("the event's metrics are NaN on every world of a search round; check the policy and the metrics.")
+        best = max(best, float(finite.max()))
+        level = min(0.0, float(np.quantile(finite, 1 - config.elite_fraction)))  # never past the event itself
+        elite, weights = elites(scored, level), importance_weights(z, proposal, config.prior_weight)
+        hits = hits.add(z[scored.event], weights[scored.event])
+        proposal = fit_mixture(z[elite], weights[elite], config, rng)
+        if level >= 0 and scored.event.sum() >= 2:  # fitted to the event's worlds: to the prior on it
+            break
+    return proposal, best, hits
+
+
+def elites(scored: Scored, level: float) -> np.ndarray:
+    """bool[n]: the worlds to fit: the event's once the bar reaches it, else those strictly past the bar (a tie at it,
+    from a discrete metric, would stall the search), else those at it; the first choice with two worlds or more."""
+    choices = ((scored.event,) if level >= 0 else ()) + (scored.margin > level,)
+    return next((choice for choice in choices if choice.sum() >= 2), scored.margin >= level)
+
+
+def fit_mixture(z: np.ndarray, weights: np.ndarray, config: ImportanceConfig, rng: np.random.Generator) -> Proposal:
+    """The cross-entropy update in the family of mixtures of shifted priors: weighted EM on elites z f64[m, dim]
+    (weights f64[m] = p/q), for 1 to ``config.components`` components, keeping the fit with the lowest BIC."""
+    weights = weights / weights.sum() if weights.sum() > 0 else np.full(len(z), 1 / len(z))
+    count = effective_sample_size(weights)  # the elites' worth in equally weighted points: BIC's sample size
+    best, best_bic = None, np.inf
+    for k in range(1, min(config.components, len(z)) + 1):
+        proposal = weighted_em(z, weights, k, rng)
+        bic = -2 * count * float(weights @ log_mixture(z, proposal)) + (k * (z.shape[1] + 1) - 1) * np.log(max(count, 2.0))
+        if bic < best_bic:
+            best, best_bic = proposal, bic
+    return best
+
+
+def weighted_em(z: np.ndarray, weights: np.ndarray, k: int, rng: np.random.Generator, steps: int = 30) -> Proposal:
+    """k shifted priors N(c, I) fitted by EM to points z f64[m, dim] with weights f64[m] (sum 1), started from
+    weighted k-means++ centres."""
+    centres = z[[rng.choice(len(z), p=weights)]]
+    while len(centres) < k:  # k-means++: the next centre far from the chosen ones
+        far = weights * np.min(((z[:, None, :] - centres[None]) ** 2).sum(-1), axis=1)
+        centres = np.vstack([centres, z[rng.choice(len(z), p=far / far.sum()) if far.sum() > 0 else rng.choice(len(z))]])
+    proposal = Proposal(centres, np.full(k, 1 / k), np.ones(k))
+    for _ in range(steps):
+        log_parts = component_logs(z, proposal)
+        resp = np.exp(log_parts - logsumexp(log_parts, axis=1, keepdims=True)) * weights[:, None]
+        mass = resp.sum(axis=0)
+        keep = mass > 1e-12  # an emptied component is dropped
+        proposal = Proposal((resp[:, keep].T @ z) / mass[keep, None], mass[keep] / mass[keep].sum(), np.ones(int(keep.sum())))
+    return proposal
+
+
+def blend(wide: Proposal, narrow: Proposal, wide_share: float) -> Proposal:
+    """The mixture wide_share · wide + (1 − wide_share) · narrow."""
+    return Proposal(
+        np.vstack([wide.centres, narrow.centres]),
+        np.concatenate([wide_share * wide.shares, (1 - wide_share) * narrow.shares]),
+        np.concatenate([wide.scales, narrow.scales]),
+    )
+
+
+def around_hits(z: np.ndarray, weights: np.ndarray, bandwidth: float, rng: np.random.Generator) -> Proposal:
+    """N(z_i, bandwidth² I) around event worlds z f64[h, dim], shares ∝ their weights f64[h] = p/q: a kernel
+    estimate of the prior on the event (``MAX_CENTRES`` of them at most, drawn by weight)."""
+    shares = weights / weights.sum()
+    if len(z) > MAX_CENTRES:
+        keep = rng.choice(len(z), MAX_CENTRES, replace=False, p=shares)
+        z, shares = z[keep], np.full(MAX_CENTRES, 1 / MAX_CENTRES)
+    return Proposal(z, shares, np.full(len(z), bandwidth))
+
+
+def component_logs(z: np.ndarray, proposal: Proposal) -> np.ndarray:
+    """f64[n, k]: log share_k + log N(z; centre_k, scale² I) − log N(z; 0, I) for latents z f64[n, dim]."""
+    squares = ((z[:, None, :] - proposal.centres[None]) ** 2).sum(-1)
+    log_norm = np.log(proposal.shares) - z.shape[1] * np.log(proposal.scales)
+    return log_norm[None] - squares / (2 * proposal.scales[None] ** 2) + 0.5 * (z**2).sum(-1)[:, None]
+
+
+def log_mixture(z: np.ndarray, proposal: Proposal) -> np.ndarray:
+    """f64[n]: log g(z) − log p(z), the proposal's log density over the prior's at latents z f64[n, dim]."""
+    return logsumexp(component_logs(z, proposal), axis=1)
+
+
+def sample_mixture(rng: np.random.Generator, proposal: Proposal, prior_weight: float, n: int) -> np.ndarray:
+    """f64[n, dim] latents from q = α N(0, I) + (1 − α) g."""
+    from_prior = rng.random(n) < prior_weight
+    component = rng.choice(len(proposal.shares), size=n, p=proposal.shares)
+    noise = rng.standard_normal((n, proposal.centres.shape[1]))
+    return np.where(from_prior[:, None], noise, proposal.centres[component] + proposal.scales[component, None] * noise)
+
+
+def importance_weights(z: np.ndarray, proposal: Proposal, prior_weight: float) -> np.ndarray:
+    """f64[n]: p(z) / q(z) for the prior p = N(0, I) and q = α p + (1 − α) g; each at most 1/α."""
+    return 1.0 / (prior_weight + (1 - prior_weight) * np.exp(np.minimum(log_mixture(z, proposal), 700.0)))
+
+
+# -- evaluation through the run store --------------------------------------------------------------
+
+
+def campaign_name(method: str, event: str, seed: int) -> str:
+    """``failure-is-crash_rate>0.5-s0``: the store campaign of one estimate."""
+    return f"failure-{method}-{''.join(event.split())}-s{seed}"
+
+
+class StoredEvaluate:
+    """``evaluate(z, seeds) -> Scored`` that commits every world to a store campaign and replays it on a rerun.
+
+    Args:
+        store: the run store; ``campaign``: the estimate's (``RunStore.open_campaign``).
+        outcomes: ``(z, seeds) -> [Outcome]`` (``search.objectives.LatentObjective``).
+        score: ``[worlds with .episodes] -> Scored`` (``score_worlds`` with the selection).
+        backend: runs the batches (``evaluation.backends``; None: here).
+        advance: called with the number of worlds done (a progress bar).
+    """
+
+    def __init__(
+        self, store: RunStore, campaign: Campaign, outcomes: Callable, score: Callable, backend: Any = None, advance: Callable | None = None
+    ):
+        self.store, self.campaign, self.outcomes, self.score = store, campaign, outcomes, score
+        self.backend, self.advance = backend or LocalBackend(), advance or (lambda done: None)
+        self.stored: dict[int, dict] = {}
+        for evaluation in store.iter_evaluations(campaign.name):
+            self.stored.setdefault(evaluation.generation, {})[evaluation.slot] = evaluation
+        self.generation = 0
+
+    def __call__(self, z: np.ndarray, seeds: np.ndarray) -> Scored:
+        generation, self.generation = self.generation, self.generation + 1
+        done = dict(self.stored.get(generation, {}))
+        if any(slot >= len(z) or not np.allclose(e.latent, z[slot], atol=REPLAY_TOLERANCE, rtol=0) for slot, e in done.items()):
+            raise WorldagentError(
+                f"campaign {self.campaign.name!r} in {self.store.path} holds other worlds at generation {generation} than this run asks "
+                "(other settings or code); use another --out."
+            )
+        self.advance(len(done))
+        missing = [slot for slot in range(len(z)) if slot not in done]
+        started = time.time()
+        for slots, outcomes in self.backend.run(self.outcomes, [(part, z[part], seeds[part]) for part in split(missing, self.backend.workers)]):
+            for slot, outcome in zip(slots, outcomes):
+                self.store.add(self.campaign, generation, slot, z[slot], self.score([outcome]).margin[0], outcome.episodes, started, outcome.world)
+                done[slot] = outcome
+            self.advance(len(slots))
+        return self.score([done[slot] for slot in range(len(z))])
 
 
 def methods(method: str) -> tuple[str, ...]:
@@ -335,6 +556,11 @@ class _Spender:
 def _narrow_enough(hits: int, interval: tuple[float, float], estimate: float, target_width: float | None) -> bool:
     """Whether sampling may stop: a target width reached with at least ``MIN_HITS`` hits."""
     return target_width is not None and hits >= MIN_HITS and estimate > 0 and (interval[1] - interval[0]) / (2 * estimate) <= target_width
+
+
+def _check_count(name: str, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise WorldagentError(f"{name}={value!r}; pass a whole number of at least 1.")
 
 
 def _check_confidence(confidence: float) -> None:

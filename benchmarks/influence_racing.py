@@ -47,7 +47,7 @@ from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
-from worldagent.influence.statistics import episode_values, mean_and_ci  # noqa: E402
+from worldagent.influence.statistics import episode_values, mean_and_ci, summarise  # noqa: E402
 from worldagent.search.atlas import distinct_count  # noqa: E402
 from worldagent.store import RunStore  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
@@ -185,7 +185,13 @@ def main(argv=None) -> dict:
     with RunStore(influence_dir) as store:
         selected = distinct_failing(store, result["worlds"]["campaigns"], experiments.failure_selection(selection, SPEC.name))
     speed = steps_per_lap(influence_dir, result)
-    summary = {**result["summary"], "steps_per_lap": {label: mean_and_ci(list(v.values())) for label, v in speed.items()}}
+    lapped = {label: [v for v in by_seed.values() if np.isfinite(v)] for label, by_seed in speed.items()}  # a parked seed never laps
+    summary = {**result["summary"], "steps_per_lap": {label: mean_and_ci(values) for label, values in lapped.items()}}
+    trained = {  # the same, without the agents the training check flagged (they weigh on the means above)
+        label: {seed: row for seed, row in runs.items() if f"{label}-s{seed}" not in result["failed_training"]}
+        for label, runs in result["per_seed"].items()
+    }
+    summary_trained = summarise(trained, list(result["summary"]))
     reward = summary["return"]
     figures = {
         "command": "python benchmarks/influence_racing.py " + " ".join(argv if argv is not None else sys.argv[1:]),
@@ -212,6 +218,7 @@ def main(argv=None) -> dict:
         "per_seed": {**result["per_seed"], "steps_per_lap": speed},
         "summary": summary,
         "intervals": comparison(summary),
+        "without_failed_training": {"summary": summary_trained, "intervals": comparison(summary_trained)},
         "reward_change_pct": round(100 * (reward["influenced"]["mean"] / reward["default"]["mean"] - 1), 2),
         "failed_training": result["failed_training"],
         "paper": {

@@ -103,7 +103,7 @@ def test_a_changed_config_is_refused_with_the_fix(racing_copy):
     with pytest.raises(WorldagentError, match=r"phase racing/random was run with another config \(worlds 42 -> 50\); rerun with --restart random"):
         reproduce(changed, racing_copy, ["racing"], progress=False, echo=lambda line: None)
     with pytest.raises(WorldagentError, match="--restart agent"):
-        reproduce(TINY.with_algo("ppo"), racing_copy, ["racing"], progress=False, echo=lambda line: None)
+        reproduce(TINY.with_algo("acktr"), racing_copy, ["racing"], progress=False, echo=lambda line: None)
 
 
 def test_restart_forgets_a_phase_and_what_depends_on_it(racing_copy):

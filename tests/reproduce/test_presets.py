@@ -35,11 +35,11 @@ def test_budgets_come_from_the_specs():
 
 def test_options_and_selections_come_from_the_specs():
     assert TINY.phase_config("harvest", "agent")["options"] == {"tagger": (0,)}  # harvest's reproduce_options
-    assert TINY.phase_config("racing", "agent")["options"] == {"observation": "rays"}  # the racing budgets' options
-    assert "options" not in QUICK.phase_config("racing", "agent")
+    assert PAPER.phase_config("racing", "agent")["options"] == {"observation": "rays"}  # the racing budgets' options
+    assert "options" not in TINY.phase_config("racing", "agent") and "options" not in QUICK.phase_config("racing", "agent")
     assert TINY.selection("harvest") == registry.get("harvest").selection == "conflict == 0"
     assert QUICK.selection("racing") == "crash_rate > 0"  # the racing budgets override the paper's selection
-    assert TINY.selection("racing") == PAPER.selection("racing") != registry.get("racing").selection
+    assert TINY.selection("racing") == registry.get("racing").selection != PAPER.selection("racing")
 
 
 @pytest.mark.parametrize("name", list(SETTINGS))
@@ -60,9 +60,12 @@ def test_a_budget_change_touches_only_its_phase():
 
 
 def test_algo_overrides_only_the_envs_that_have_it():
-    ppo = TINY.with_algo("ppo")
-    assert (TINY.algo_of("racing"), ppo.algo_of("racing"), ppo.algo_of("harvest")) == ("acktr", "ppo", "dqn")
-    assert ppo.phase_config("racing", "agent")["algo"] == "ppo" and ppo.phase_config("harvest", "agent") == TINY.phase_config("harvest", "agent")
+    acktr, ppo = TINY.with_algo("acktr"), PAPER.with_algo("ppo")
+    assert (TINY.algo_of("racing"), acktr.algo_of("racing"), acktr.algo_of("harvest")) == ("ppo", "acktr", "dqn")
+    assert acktr.phase_config("racing", "agent")["algo"] == "acktr" and acktr.phase_config("harvest", "agent") == TINY.phase_config(
+        "harvest", "agent"
+    )
+    assert (PAPER.algo_of("racing"), ppo.algo_of("racing")) == ("acktr", "ppo")  # --algo overrides the preset's own
 
 
 def test_bad_names_and_budgets_are_refused_in_one_line():

@@ -128,7 +128,7 @@ def test_a_directory_without_a_run_is_refused(tmp_path):
 def test_reproduce_command_shows_presets_and_refuses_changes_in_one_line(racing_copy):
     shown = CliRunner().invoke(app, ["reproduce", "--preset", "quick", "--show"])
     assert shown.exit_code == 0 and json.loads(shown.output)["name"] == "quick"
-    changed = CliRunner().invoke(app, ["reproduce", "--preset", "tiny", "--env", "racing", "--algo", "ppo", "--out", str(racing_copy), "--quiet"])
+    changed = CliRunner().invoke(app, ["reproduce", "--preset", "tiny", "--env", "racing", "--algo", "acktr", "--out", str(racing_copy), "--quiet"])
     assert changed.exit_code == 2 and "--restart agent" in changed.output and "Traceback" not in changed.output
 
 

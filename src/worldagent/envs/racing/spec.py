@@ -264,9 +264,6 @@ SPEC = register(
                 atlas_budget=105,
                 failure_worlds=64,
                 train_envs=8,
-                influence_selection="crash_rate > 0",
-                options={"observation": "rays"},  # the paper preset's agent, so CI runs it
-                algo="acktr",
             ),
         },
         selection="crash_rate > 0.5",

@@ -80,8 +80,8 @@ class EnvBudgets:
             absent: for the route PPO agent 2 of 1,000 random worlds, and a 2,100-world CMA-ES
             search found only 9 distinct tracks (agents trained on those failed: 3 seeds, crash
             rate 0.56, no laps); for the rays ACKTR agent none of 1,000 random worlds and none of
-            a 2,100-world crash-maximising atlas (its worst: 4 crashes in 8;
-            ``benchmarks/results/influence-racing.json``). The racing presets therefore select
+            a 2,100-world crash-maximising atlas (its worst: 2 crashes in 8), and 1 of all 10,000
+            dataset tracks (``benchmarks/results/influence-racing.json``). The racing presets therefore select
             the worlds where the agent crashed at all (``"crash_rate > 0"``).
     """
 

@@ -152,3 +152,19 @@ def test_rays_heading_is_the_unit_velocity_once_moving(track):
     for speed in (0.004, 0.04):  # one push, the top speed
         _, moving = RAYS.place(state, np.asarray(track.centreline[0]), [0.0, speed], PARAMS)
         np.testing.assert_allclose(RAYS.observe(moving, PARAMS)[-6:-4], [0.0, 1.0], atol=1e-6)
+
+
+def test_a_kept_heading_faces_the_start_line_and_survives_a_stop(oval):
+    """heading="kept": along the start line at reset; the last motion's direction while (nearly) at rest, where the
+    unit velocity ("motion") shrinks to a tenth and points back the way the last push went."""
+    kept = ParticleRacing(observation="rays", heading="kept")
+    obs, state = kept.reset(KEY, oval, PARAMS)
+    np.testing.assert_allclose(obs[-6:-4], [0.0, 1.0], atol=0.05)  # the oval is driven north from its east end
+    east, west = 0, 1  # ACTION_NAMES
+    _, state, *_ = kept.step(KEY, state, east, PARAMS)
+    _, state, *_ = kept.step(KEY, state, west, PARAMS)  # 0.9 · 0.004 − 0.004: nearly at rest, drifting west
+    np.testing.assert_allclose(kept.observe(state, PARAMS)[-6:-4], [1.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(RAYS.observe(state, PARAMS)[-6:-4], [-0.2, 0.0], atol=1e-5)
+    with pytest.raises(WorldagentError, match="heading"):
+        ParticleRacing(observation="rays", heading="compass")
+    assert registry.get("racing").make_env({"observation": "rays", "heading": "kept"})[0].heading == "kept"

@@ -38,6 +38,10 @@ Observations (``ParticleRacing.observation``):
   to 0 below ``HEADING_MIN_SPEED`` of the top speed), then position and velocity. The heading is
   the paper's "directional speed" at any speed: with the velocity alone, a cautious learner's
   slow driving (a few pushes' worth) hid which way it was going, and it did not learn to lap.
+  With ``heading="kept"`` it is the direction of the last motion above that speed instead,
+  kept while the agent is (nearly) at rest, and along the start line at reset, as a car keeps
+  its orientation when it stops (``docs/racing.md``: a stalled agent's heading otherwise
+  follows its last push).
 
 Without the route neither names which way along the road is forward: the agent has its
 position (tracks run counter-clockwise around the middle) and its velocity. That, not seeing
@@ -75,6 +79,7 @@ ROUTE_SCALE = 0.1
 
 OBSERVATIONS = ("route", "surroundings", "rays")
 HEADING_MIN_SPEED = 0.05  # "rays": below this fraction of the top speed the heading shrinks to 0
+HEADINGS = ("motion", "kept")  # "rays": the unit velocity, or the last motion's direction kept at rest
 RAY_DIRECTIONS = 16  # "rays": directions, evenly spaced from east, counter-clockwise
 RAY_SAMPLES_PER_PIXEL = 2  # "rays": samples along each ray per road-mask pixel
 
@@ -123,6 +128,8 @@ class RacingState:
     Attributes:
         world: the Track being driven.
         position, velocity: f32[2] in normalised units (per step).
+        heading: f32[2] unit direction of the last motion above ``HEADING_MIN_SPEED`` (at reset:
+            along the start line).
         segment: i32 index of the centreline segment the agent is on (from point i to i+1).
         arc: f32 position along the loop as a lap fraction in [0, 1).
         progress: f32 net laps driven (unwrapped; negative when driving backwards).
@@ -136,6 +143,7 @@ class RacingState:
     world: Track
     position: jax.Array
     velocity: jax.Array
+    heading: jax.Array
     segment: jax.Array
     arc: jax.Array
     progress: jax.Array
@@ -181,7 +189,8 @@ class ParticleRacing(Environment):
     """The Particle Racing environment; static configuration only (see module docstring).
 
     Attributes:
-        observation: "route" (the default) or "surroundings" (the paper's; see the module docstring).
+        observation: "route" (the default), "surroundings" or "rays" (see the module docstring).
+        heading: "rays": "motion" (the unit velocity) or "kept" (the last motion's direction, kept at rest).
         window: side W of the square full-resolution road window, in road-mask pixels (1/64
             units each); 0 for none (the default with "route"; "surroundings" needs one).
         route: segments ahead of the agent's whose centreline points are observed with "route".
@@ -192,6 +201,7 @@ class ParticleRacing(Environment):
     """
 
     observation: str = "route"
+    heading: str = "motion"
     window: int = 0
     route: tuple[int, ...] = ROUTE_OFFSETS
     reach: int = 64
@@ -205,6 +215,8 @@ class ParticleRacing(Environment):
         largest = int(ROAD_SIZE * (1.0 - MAX_EXTENT - 2 * HALF_WIDTH))
         if self.observation not in OBSERVATIONS:
             raise WorldagentError(f"observation={self.observation!r}; use one of {', '.join(OBSERVATIONS)}.")
+        if self.heading not in HEADINGS:
+            raise WorldagentError(f"heading={self.heading!r}; use one of {', '.join(HEADINGS)}.")
         if not 0 <= self.window <= largest:
             raise WorldagentError(f"window={self.window} is out of range; use 0 (none) to {largest} road-mask pixels.")
         if self.observation == "surroundings" and not (self.window >= 1 and self.coarse >= 1 and self.reach % self.coarse == 0):
@@ -254,6 +266,7 @@ class ParticleRacing(Environment):
             world=world,
             position=world.centreline[0].astype(jnp.float32),
             velocity=jnp.zeros(2, jnp.float32),
+            heading=_unit(world.centreline[1] - world.centreline[0]),  # facing along the start line
             segment=jnp.int32(0),
             arc=jnp.float32(0.0),
             progress=jnp.float32(0.0),
@@ -300,6 +313,7 @@ class ParticleRacing(Environment):
         state = state.replace(
             position=position,
             velocity=velocity,
+            heading=_kept_heading(velocity, state.heading, params),
             segment=segment,
             arc=arc,
             progress=progress,
@@ -327,6 +341,7 @@ class ParticleRacing(Environment):
             centre, axis = road_here(state.world.centreline, state.segment, state.position)
             speed = jnp.linalg.norm(state.velocity)
             heading = state.velocity / jnp.maximum(speed, HEADING_MIN_SPEED * top_speed)  # unit length once moving
+            heading = state.heading if self.heading == "kept" else heading
             parts = [road_rays(state.world.road, state.position, self.reach // 2), centre / params.half_width, axis, heading, *motion]
         else:
             centreline = state.world.centreline
@@ -335,6 +350,16 @@ class ParticleRacing(Environment):
             if self.window:
                 parts.insert(0, road_window(state.world.road, state.position, self.window).reshape(-1))
         return jnp.concatenate([p.astype(jnp.float32) for p in parts])
+
+
+def _unit(vector: jax.Array) -> jax.Array:
+    return (vector / jnp.maximum(jnp.linalg.norm(vector), 1e-12)).astype(jnp.float32)
+
+
+def _kept_heading(velocity: jax.Array, heading: jax.Array, params: RacingParams) -> jax.Array:
+    """The unit velocity once moving faster than ``HEADING_MIN_SPEED`` of the top speed, else ``heading`` as it was."""
+    moving = jnp.linalg.norm(velocity) > HEADING_MIN_SPEED * params.force / params.friction
+    return jnp.where(moving, _unit(velocity), heading)
 
 
 def _respawn_where(respawn, centreline, segment, position, velocity, arc, progress, speed=0.0):

@@ -25,7 +25,7 @@ def make(options):
     if options["observation"] == "surroundings":
         env = ParticleRacing(observation="surroundings", window=PAPER_WINDOW, reach=options["reach"])
     elif options["observation"] == "rays":
-        env = ParticleRacing(observation="rays", reach=options["reach"])
+        env = ParticleRacing(observation="rays", reach=options["reach"], heading=options["heading"])
     else:
         env = ParticleRacing()
     speed = options["respawn_speed"]
@@ -44,6 +44,14 @@ def parse_observation(text: str) -> str:
 
     if text not in OBSERVATIONS:
         raise ValueError(f"unknown observation {text!r}; use {' or '.join(OBSERVATIONS)}")
+    return text
+
+
+def parse_heading(text: str) -> str:
+    from worldagent.envs.racing.env import HEADINGS
+
+    if text not in HEADINGS:
+        raise ValueError(f"unknown heading {text!r}; use {' or '.join(HEADINGS)}")
     return text
 
 
@@ -187,6 +195,9 @@ SPEC = register(
                 None,
             ),
             EnvOption("reach", "surroundings: side of the coarse road view around the agent, pixels of 1/64 unit (multiple of 16)", parse_reach, 64),
+            EnvOption(
+                "heading", "rays: motion (the unit velocity) or kept (the last motion's direction, kept at rest; on trial)", parse_heading, "motion"
+            ),
         ),
         world_type=__import__("worldagent.envs.racing.world", fromlist=["Track"]).Track,
         generate=generate,

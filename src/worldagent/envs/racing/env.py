@@ -339,9 +339,10 @@ class ParticleRacing(Environment):
             parts = [fine.reshape(-1), coarse.reshape(-1), *motion]
         elif self.observation == "rays":
             centre, axis = road_here(state.world.centreline, state.segment, state.position)
-            speed = jnp.linalg.norm(state.velocity)
-            heading = state.velocity / jnp.maximum(speed, HEADING_MIN_SPEED * top_speed)  # unit length once moving
-            heading = state.heading if self.heading == "kept" else heading
+            if self.heading == "kept":
+                heading = state.heading
+            else:  # unit length once moving
+                heading = state.velocity / jnp.maximum(jnp.linalg.norm(state.velocity), HEADING_MIN_SPEED * top_speed)
             parts = [road_rays(state.world.road, state.position, self.reach // 2), centre / params.half_width, axis, heading, *motion]
         else:
             centreline = state.world.centreline

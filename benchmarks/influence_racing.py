@@ -5,8 +5,8 @@
 
 The agent sees what the paper's does (§5.1.1: "its surrounding area, as well as its current
 position and directional speed"): racing's ``rays`` observation, trained with the settings the
-racing spec gives it (``option_overrides``: those that made it lap, ``docs/racing.md``). Steps, each cached under ``--work`` (a killed run
-resumes where it stopped):
+racing spec gives it (``option_overrides``: those that made it lap, ``docs/racing.md``). Steps,
+each cached under ``--work`` (a killed run resumes where it stopped):
 
 1. the generator G(z): ``--generator`` if it holds one, else the paper preset's dataset and VAE
    made under ``--work``;

@@ -40,8 +40,8 @@ Observations (``ParticleRacing.observation``):
   slow driving (a few pushes' worth) hid which way it was going, and it did not learn to lap.
   With ``heading="kept"`` it is the direction of the last motion above that speed instead,
   kept while the agent is (nearly) at rest, and along the start line at reset, as a car keeps
-  its orientation when it stops (``docs/racing.md``: a stalled agent's heading otherwise
-  follows its last push).
+  its orientation when it stops. On trial: it did not stop ACKTR's seeds from parking
+  (``docs/racing.md``), so "motion" stays the default.
 
 Without the route neither names which way along the road is forward: the agent has its
 position (tracks run counter-clockwise around the middle) and its velocity. That, not seeing

@@ -36,6 +36,7 @@ import argparse
 import json
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import jax
@@ -46,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import RESULTS, describe_machine  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.analysis import failure_rate as fr  # noqa: E402
+from worldagent.analysis.surrogate import distinct_describer  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
 from worldagent.influence.selection import parse_selection  # noqa: E402
@@ -106,6 +108,7 @@ TRIED = [
     "not kept (the per-batch estimator above covered harvest 3/3)",
 ]
 CHUNK = 10_000  # worlds per evaluator call in the brute force
+ARCHIVED = ("search_proposal", "pooled_trial")  # full runs of proposals not kept, carried over from the recorded file
 
 
 def small_generator(env: str, size: int, epochs: int):
@@ -200,7 +203,27 @@ def threshold_for(values: np.ndarray, p: float, op: str) -> float:
     return float(f"{middles[np.argmin(np.abs(np.log(tail / p)))]:.9g}")
 
 
-def run_event(means, setup, selection, reference: dict, mc_cap: int, args) -> dict:
+def importance_config(args) -> fr.ImportanceConfig:
+    """The importance-sampling settings the command line picks (the library's defaults otherwise)."""
+    return fr.ImportanceConfig(proposal=args.proposal, pool=args.pool, pilot=args.pilot)
+
+
+class Described:
+    """The pool's descriptors, computed once per env: every event's estimate draws the same pool (same seed)."""
+
+    def __init__(self, describe):
+        self.describe, self.kept, self.seconds = describe, {}, 0.0
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        key = (z.shape, z[:2].tobytes())
+        if key not in self.kept:
+            start = time.perf_counter()
+            self.kept[key] = self.describe(z)
+            self.seconds += time.perf_counter() - start
+        return self.kept[key]
+
+
+def run_event(means, setup, selection, reference: dict, mc_cap: int, args, describe=None) -> dict:
     """Monte Carlo and importance sampling of the event to ``--width``, and Monte Carlo at IS's cost."""
     metric = selection.metrics[0]
     dim = setup.generator.latent_dim
@@ -209,7 +232,8 @@ def run_event(means, setup, selection, reference: dict, mc_cap: int, args) -> di
         return fr.score_means(selection, {metric: means(z, seeds)}, len(z) * setup.repeats)
 
     row = {"event": selection.text}
-    for name, estimator in (("mc", fr.monte_carlo), ("is", fr.importance_sampling)):
+    importance = partial(fr.importance_sampling, config=importance_config(args), describe=describe)
+    for name, estimator in (("mc", fr.monte_carlo), ("is", importance)):
         start = time.perf_counter()
         cap = mc_cap if name == "mc" else args.is_cap
         try:
@@ -247,7 +271,7 @@ def run_env(env: str, args) -> dict:
     )
     if args.brute_force_only:
         return {"brute_force_worlds": len(values), "brute_force_seconds": round(seconds, 1)}
-    events = []
+    events, describe = [], Described(distinct_describer(setup.spec, setup.generator))
     for p in PROBABILITIES:
         threshold = threshold_for(values, p, settings["op"])
         selection = parse_selection(f"{metric} {settings['op']} {threshold!r}", env)
@@ -258,7 +282,7 @@ def run_env(env: str, args) -> dict:
             "target_probability": p,
             "threshold": threshold,
             "brute_force": reference,
-            **run_event(means, setup, selection, reference, mc_cap, args),
+            **run_event(means, setup, selection, reference, mc_cap, args, describe),
         }
         events.append(row)
         print(summary(env, row), flush=True)
@@ -271,6 +295,7 @@ def run_env(env: str, args) -> dict:
         "brute_force_episodes": len(values) * repeats,
         "brute_force_seconds": None if np.isnan(seconds) else round(seconds, 1),  # NaN: a cache filled by a mis-timed run
         "seconds_per_world": per_world,
+        "pool_describe_seconds": round(describe.seconds, 1),  # decoding and describing the surrogate's pool (no episode)
         "events": events,
     }
 
@@ -293,6 +318,9 @@ def main() -> None:
     parser.add_argument("--width", type=float, default=0.5, help="relative half-width of the 95%% interval to reach")
     parser.add_argument("--is-cap", type=int, default=50_000, help="importance sampling's worlds at most (after the search)")
     parser.add_argument("--is-batch", type=int, default=250, help="importance sampling's worlds per batch (its proposal is refitted after each)")
+    parser.add_argument("--proposal", choices=fr.PROPOSALS, default="surrogate", help="importance sampling's proposal")
+    parser.add_argument("--pool", type=int, default=fr.ImportanceConfig.pool, help="the surrogate's pool of prior worlds")
+    parser.add_argument("--pilot", type=int, default=fr.ImportanceConfig.pilot, help="the surrogate's pilot worlds (evaluated)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--envs", nargs="+", default=["racing", "harvest"])
     parser.add_argument("--cache", type=Path, default=None, help="keep the brute-force values here and reuse them (same G, worlds, seed)")
@@ -320,11 +348,13 @@ def write_results(args, results: dict, seconds: float) -> None:
     settings = {
         **{key: str(value) if isinstance(value, Path) else value for key, value in vars(args).items()},
         "envs": {env: ENVS[env] for env in args.envs},
-        "importance": fr.ImportanceConfig().__dict__,
+        "importance": importance_config(args).__dict__,
         "batch": {"mc": 1000, "is": args.is_batch},
         "min_hits": fr.MIN_HITS,
     }
     kept = {env: entry for env, entry in kept_results(settings).items() if env not in results}
+    old = json.loads((RESULTS / "failure-rate.json").read_text()) if (RESULTS / "failure-rate.json").exists() else {}
+    archived = {name: old[name] for name in ARCHIVED if name in old}
     settings["envs"] = {env: ENVS[env] for env in (*kept, *results)}
     payload = {
         "benchmark": "failure_rate",
@@ -333,6 +363,7 @@ def write_results(args, results: dict, seconds: float) -> None:
         "settings": settings,
         "seconds": round(seconds, 1),
         "tried": TRIED,
+        **archived,
         **kept,
         **results,
     }

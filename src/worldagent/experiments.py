@@ -624,6 +624,7 @@ def failure_rate(
     from functools import partial
 
     from worldagent.analysis import failure_rate as fr
+    from worldagent.analysis import stored
     from worldagent.influence.selection import parse_selection
     from worldagent.progress import progress_bar
 
@@ -635,13 +636,21 @@ def failure_rate(
     outcomes = LatentObjective(objective, setup.env, setup.policy, setup.generator, setup.repeats, setup.params, keep_worlds=False)
     found = {}
     for name in methods:
-        total = worlds + (importance.max_rounds * importance.round_worlds if name == "is" else 0)
+        searched = importance.pilot if importance.proposal == "surrogate" else importance.max_rounds * importance.round_worlds
+        total = worlds + (searched if name == "is" else 0)
         config = {"event": selection.text, "repeats": setup.repeats, "batch": fr.BATCH, "agent": agent_record(setup.policy)}
         config |= {"worlds": int(worlds), "target_width": target_width}  # what ``analysis.stored.read_estimate`` replays
         config |= asdict(importance) if name == "is" else {}
-        campaign = store.open_campaign(fr.campaign_name(name, selection.text, seed), setup.spec.name, "margin", True, name, total, seed, config, True)
+        campaign = store.open_campaign(
+            stored.campaign_name(name, selection.text, seed), setup.spec.name, "margin", True, name, total, seed, config, True
+        )
         with progress_bar(f"{name}: P({selection.describe()})", total=total, enabled=progress) as advance:
-            evaluate = fr.StoredEvaluate(store, campaign, outcomes, partial(fr.score_worlds, selection), setup.backend, advance)
-            estimator = partial(fr.importance_sampling, config=importance) if name == "is" else fr.monte_carlo
+            evaluate = stored.StoredEvaluate(store, campaign, outcomes, partial(fr.score_worlds, selection), setup.backend, advance)
+            describe = None
+            if name == "is" and importance.proposal == "surrogate":
+                from worldagent.analysis.surrogate import distinct_describer, kept_describer, pool_file
+
+                describe = kept_describer(pool_file(store.path, campaign.name), distinct_describer(setup.spec, setup.generator))
+            estimator = partial(fr.importance_sampling, config=importance, describe=describe) if name == "is" else fr.monte_carlo
             found[name] = estimator(evaluate, setup.generator.latent_dim, worlds, seed=seed, batch=fr.BATCH, target_width=target_width)
     return found

@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from worldagent.analysis import failure_rate as fr
+from worldagent.analysis import mixtures, stored, surrogate
 from worldagent.analysis.stored import failure_names, read_estimate
 from worldagent.cli import app
 from worldagent.commands.failure_rate import estimate_line
@@ -54,15 +55,18 @@ def test_clopper_pearson_textbook_values_and_symmetry():
 
 @pytest.mark.parametrize(
     "proposal",
-    [fr.Proposal.shift(np.array([3.0, -1.0])), fr.Proposal(np.array([[3.0, -1.0], [-2.5, 0.5]]), np.array([0.7, 0.3]), np.array([0.7, 1.0]))],
+    [
+        mixtures.Proposal.shift(np.array([3.0, -1.0])),
+        mixtures.Proposal(np.array([[3.0, -1.0], [-2.5, 0.5]]), np.array([0.7, 0.3]), np.array([0.7, 1.0])),
+    ],
 )
 def test_weights_are_bounded_by_the_prior_share_and_ess_counts_equal_weights(proposal):
-    z = fr.sample_mixture(np.random.default_rng(0), proposal, 0.2, 20_000)
-    weights = fr.importance_weights(z, proposal, 0.2)
+    z = mixtures.sample_mixture(np.random.default_rng(0), proposal, 0.2, 20_000)
+    weights = mixtures.importance_weights(z, proposal, 0.2)
     assert weights.max() <= 1 / 0.2 and weights.min() > 0
     assert np.mean(weights) == pytest.approx(1.0, abs=0.05)  # E_q[p/q] = 1
-    assert fr.effective_sample_size(np.ones(7)) == pytest.approx(7.0)
-    assert fr.effective_sample_size(np.array([1.0, 0.0, 0.0])) == pytest.approx(1.0)
+    assert mixtures.effective_sample_size(np.ones(7)) == pytest.approx(7.0)
+    assert mixtures.effective_sample_size(np.array([1.0, 0.0, 0.0])) == pytest.approx(1.0)
 
 
 # -- the event's margin ----------------------------------------------------------------------------
@@ -88,8 +92,10 @@ def test_monte_carlo_covers_the_toy_and_stops_at_a_target_width():
     assert early.worlds < 20_000 and early.relative_half_width <= 0.3 and early.hits >= fr.MIN_HITS
 
 
-def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_than_monte_carlo():
-    estimate = fr.importance_sampling(toy, 10, 2000, seed=0)
+@pytest.mark.parametrize("proposal", fr.PROPOSALS)
+def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_than_monte_carlo(proposal):
+    config = fr.ImportanceConfig(proposal=proposal)
+    estimate = fr.importance_sampling(toy, 10, 2000, seed=0, config=config)
     assert estimate.low <= P_TOY <= estimate.high
     assert estimate.worlds == estimate.search_worlds + 2000 and estimate.episodes == estimate.worlds
     width = estimate.relative_half_width
@@ -97,7 +103,58 @@ def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_
     monte_carlo_worlds = Z95**2 * (1 - P_TOY) / (P_TOY * width**2)  # binomial: half-width z·sqrt(P(1-P)/n) = width·P
     assert 10 * estimate.worlds <= monte_carlo_worlds
     assert 0 < estimate.event_ess <= estimate.hits and 0 < estimate.ess <= 2000
-    assert fr.importance_sampling(toy, 10, 2000, seed=0) == estimate  # deterministic given the seed
+    assert fr.importance_sampling(toy, 10, 2000, seed=0, config=config) == estimate  # deterministic given the seed
+
+
+def test_the_surrogate_covers_two_regions_and_its_interval_counts_the_pool():
+    found = [fr.importance_sampling(two_sided, 10, 1000, seed=seed) for seed in range(6)]
+    assert sum(e.low <= P_TWO <= e.high for e in found) >= 5 and all(0.6 < e.estimate / P_TWO < 1.6 for e in found)
+    assert all(e.search_worlds == fr.ImportanceConfig().pilot and e.worlds == e.search_worlds + 1000 for e in found)
+    small = fr.importance_sampling(two_sided, 10, 1000, seed=0, config=fr.ImportanceConfig(pool=20_000))
+    pool_alone = Z95 * np.sqrt(small.estimate * (1 - small.estimate) / 20_000)  # the pool's binomial spread
+    assert (small.high - small.low) / 2 >= pool_alone and small.relative_half_width > found[0].relative_half_width
+
+
+def product(z: np.ndarray, seeds: np.ndarray) -> fr.Scored:
+    """The event z0 · z1 > 6 (mass 3.6e-4), which [1, z, z²] cannot model but a descriptor z0 · z1 can."""
+    return fr.Scored(z[:, 0] * z[:, 1] - 6, z[:, 0] * z[:, 1] > 6, len(z))
+
+
+def test_the_surrogate_reads_the_worlds_descriptors():
+    config = fr.ImportanceConfig(pool=50_000)
+    blind = fr.importance_sampling(product, 10, 1000, seed=0, config=config)
+    seeing = fr.importance_sampling(product, 10, 1000, seed=0, config=config, describe=lambda z: (z[:, 0] * z[:, 1])[:, None])
+    assert seeing.event_ess > 10 * blind.event_ess and seeing.relative_half_width < blind.relative_half_width / 2
+    assert seeing.low <= P_PRODUCT <= seeing.high
+
+
+def _product_tail() -> float:
+    """P(z0 · z1 > 6) = 2 ∫_0^∞ φ(x) (1 − Φ(6 / x)) dx for independent standard normals."""
+    from scipy.integrate import quad
+    from scipy.stats import norm
+
+    return 2 * quad(lambda x: norm.pdf(x) * norm.sf(6 / x), 1e-9, np.inf)[0]
+
+
+P_PRODUCT = _product_tail()
+
+
+def test_surrogate_features_and_chances():
+    z = np.array([[0.0, 1.0], [2.0, -1.0], [1.0, 0.0]])
+    described = np.array([[5.0, 1.0], [7.0, 1.0], [9.0, 1.0]])  # the second descriptor is constant: dropped
+    x = surrogate.features(z, described)
+    assert x.shape == (3, 1 + 2 + 2 + 1)
+    np.testing.assert_allclose(x[:, :5], [[1, 0, 1, 0, 1], [1, 2, -1, 4, 1], [1, 1, 0, 1, 0]])
+    np.testing.assert_allclose(x[:, 5], np.array([-1, 0, 1]) * np.sqrt(1.5))
+    pool = np.random.default_rng(0).standard_normal((5000, 3))
+    features = surrogate.features(pool)
+    log_chance = surrogate.log_chances(features, features[:300], pool[:300, 0] - 2)  # the margin z0 - 2, exactly linear
+    chance = np.exp(log_chance)
+    assert chance[pool[:, 0] > 2.5].min() > 0.99 and chance[pool[:, 0] < 1.5].max() < 0.01
+    shares = surrogate.pool_shares(log_chance, 0.1)
+    assert shares.sum() == pytest.approx(1) and np.all(1 / (len(pool) * shares) <= 10 + 1e-9)
+    with pytest.raises(WorldagentError, match="NaN on the pilot"):
+        surrogate.log_chances(features, features[:3], np.array([-np.inf, -np.inf, 1.0]))
 
 
 def test_importance_sampling_learns_the_prior_mean_on_the_event():
@@ -117,16 +174,19 @@ def two_sided(z: np.ndarray, seeds: np.ndarray) -> fr.Scored:
 P_TWO = 2 * (1 - NormalDist().cdf(3.2))
 
 
+SEARCH = fr.ImportanceConfig(proposal="search")
+
+
 def test_a_mixture_covers_two_regions_where_a_single_mean_shift_fails():
-    single = fr.ImportanceConfig(components=1)
+    single = fr.ImportanceConfig(components=1, proposal="search")
     shift, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, single)
-    mixture, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, fr.ImportanceConfig())
+    mixture, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, SEARCH)
     assert len(shift.shares) == 1 and abs(shift.centres[0, 0]) > 2.5  # one side only: the other is left to the prior
     assert sorted(np.sign(mixture.centres[:, 0])) == [-1, 1] and np.all(np.abs(mixture.centres[:, 0]) > 2.5)
     assert np.all(mixture.shares > 0.25)
     seeds = range(8)
     shifted = [fr.importance_sampling(two_sided, 10, 2000, seed=seed, config=single) for seed in seeds]
-    mixed = [fr.importance_sampling(two_sided, 10, 2000, seed=seed) for seed in seeds]
+    mixed = [fr.importance_sampling(two_sided, 10, 2000, seed=seed, config=SEARCH) for seed in seeds]
     assert sum(e.low <= P_TWO <= e.high for e in shifted) <= 5  # the prior's share finds the far side too rarely
     assert all(e.low <= P_TWO <= e.high for e in mixed)
     width = np.median([e.relative_half_width for e in mixed])  # one seed's noisy centres may widen its interval
@@ -153,8 +213,8 @@ def test_a_rerun_replays_the_store_and_evaluates_nothing(tmp_path):
     with RunStore(tmp_path) as store:
 
         def estimate(batch):
-            campaign = store.open_campaign(fr.campaign_name("mc", selection.text, 0), "racing", "margin", True, "mc", 600, 0, {}, True)
-            evaluate = fr.StoredEvaluate(store, campaign, outcomes, lambda ws: fr.score_worlds(selection, ws))
+            campaign = store.open_campaign(stored.campaign_name("mc", selection.text, 0), "racing", "margin", True, "mc", 600, 0, {}, True)
+            evaluate = stored.StoredEvaluate(store, campaign, outcomes, lambda ws: fr.score_worlds(selection, ws))
             return fr.monte_carlo(evaluate, 3, 600, seed=0, batch=batch)
 
         first = estimate(200)
@@ -178,6 +238,8 @@ def test_a_rerun_replays_the_store_and_evaluates_nothing(tmp_path):
         (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(prior_weight=1.5)), "prior_weight=1.5"),
         (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(bandwidth=1.5)), "bandwidth=1.5"),
         (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(components=0)), "components=0"),
+        (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(pool=100, pilot=500)), "pilot must be a part of the pool"),
+        (lambda: fr.importance_sampling(toy, 10, 100, config=fr.ImportanceConfig(proposal="bayes")), "use search or surrogate"),
         (lambda: fr.clopper_pearson(5, 3), "0 <= k <= n"),
         (lambda: fr.methods("bootstrap"), "use mc, is or both"),
         (lambda: parse_selection("speed > 3", "racing"), "unknown racing metric 'speed'"),
@@ -192,7 +254,7 @@ def test_bad_input_is_refused_with_one_line(call, message):
 def test_an_event_that_never_occurs_is_refused_by_importance_sampling():
     never = lambda z, s: fr.Scored(-np.abs(z[:, 0]) - 1, np.zeros(len(z), bool), len(z))  # |z0| < -1: impossible
     with pytest.raises(WorldagentError) as error:
-        fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(round_worlds=100, max_rounds=3))
+        fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(round_worlds=100, max_rounds=3, proposal="search"))
     assert "never occurred in the 500 worlds sampled" in one_line(error) and "check the thresholds" in str(error.value)
     nothing = fr.monte_carlo(never, 10, 500)  # Monte Carlo's answer is an upper bound
     assert (nothing.estimate, nothing.low, nothing.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 500)))
@@ -207,14 +269,14 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
     runner = CliRunner()
     gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
     common = ["racing", "--agent", "driver", "--generator", str(gen), "--out", str(tmp_path / "run"), "--repeats", "1", "--quiet"]
-    args = [*common, "--event", "return < 60", "--worlds", "30", "--round-worlds", "20", "--rounds", "2"]
+    args = [*common, "--event", "return < 60", "--worlds", "30", "--pool", "2000", "--pilot", "20"]
     result = runner.invoke(app, ["failure-rate", *args])
     assert result.exit_code == 0, result.output
     assert "Monte Carlo: P = " in result.output and "importance sampling: P = " in result.output and "ESS" in result.output
     with RunStore(tmp_path / "run", create=False) as store:
         names = [c.name for c in store.campaigns()]
         assert names == ["failure-mc-return<60-s0", "failure-is-return<60-s0"]
-        assert len(store.evaluations(names[0])) == 30 and 30 < len(store.evaluations(names[1])) <= 70
+        assert len(store.evaluations(names[0])) == 30 and len(store.evaluations(names[1])) == 20 + 30
     assert runner.invoke(app, ["failure-rate", *args]).output == result.output  # resumed: the same lines
     with RunStore(tmp_path / "run", create=False) as store:  # read back with no agent or generator: the same estimates
         assert failure_names(store) == names
@@ -225,6 +287,7 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
         (["--event", "speed > 3"], "unknown racing metric 'speed'"),
         (["--event", "return < 60", "--worlds", "0"], "--worlds is 0"),
         (["--event", "return < 60", "--round-worlds", "5"], "fewer than 2 elites"),
+        (["--event", "return < 60", "--pilot", "500", "--pool", "400"], "pilot must be a part of the pool"),
         (["--event", "return < 60", "--method", "bootstrap"], "use mc, is or both"),
     ]:
         bad = runner.invoke(app, ["failure-rate", *common, *extra])

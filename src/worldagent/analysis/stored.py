@@ -9,10 +9,64 @@ probability table that way instead of copying a phase's log.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from functools import partial
+from typing import Any
+
+import numpy as np
 
 from worldagent.analysis import failure_rate as fr
+from worldagent.analysis.surrogate import kept_describer, pool_file
 from worldagent.errors import WorldagentError
+from worldagent.evaluation.backends import LocalBackend, split
+from worldagent.search.campaign import REPLAY_TOLERANCE
+from worldagent.store import Campaign, RunStore
+
+
+def campaign_name(method: str, event: str, seed: int) -> str:
+    """``failure-is-crash_rate>0.5-s0``: the store campaign of one estimate."""
+    return f"failure-{method}-{''.join(event.split())}-s{seed}"
+
+
+class StoredEvaluate:
+    """``evaluate(z, seeds) -> Scored`` that commits every world to a store campaign and replays it on a rerun.
+
+    Args:
+        store: the run store; ``campaign``: the estimate's (``RunStore.open_campaign``).
+        outcomes: ``(z, seeds) -> [Outcome]`` (``search.objectives.LatentObjective``).
+        score: ``[worlds with .episodes] -> Scored`` (``score_worlds`` with the selection).
+        backend: runs the batches (``evaluation.backends``; None: here).
+        advance: called with the number of worlds done (a progress bar).
+    """
+
+    def __init__(
+        self, store: RunStore, campaign: Campaign, outcomes: Callable, score: Callable, backend: Any = None, advance: Callable | None = None
+    ):
+        self.store, self.campaign, self.outcomes, self.score = store, campaign, outcomes, score
+        self.backend, self.advance = backend or LocalBackend(), advance or (lambda done: None)
+        self.stored: dict[int, dict] = {}
+        for evaluation in store.iter_evaluations(campaign.name):
+            self.stored.setdefault(evaluation.generation, {})[evaluation.slot] = evaluation
+        self.generation = 0
+
+    def __call__(self, z: np.ndarray, seeds: np.ndarray) -> fr.Scored:
+        generation, self.generation = self.generation, self.generation + 1
+        done = dict(self.stored.get(generation, {}))
+        if any(slot >= len(z) or not np.allclose(e.latent, z[slot], atol=REPLAY_TOLERANCE, rtol=0) for slot, e in done.items()):
+            raise WorldagentError(
+                f"campaign {self.campaign.name!r} in {self.store.path} holds other worlds at generation {generation} than this run asks "
+                "(other settings or code); use another --out."
+            )
+        self.advance(len(done))
+        missing = [slot for slot in range(len(z)) if slot not in done]
+        started = time.time()
+        for slots, outcomes in self.backend.run(self.outcomes, [(part, z[part], seeds[part]) for part in split(missing, self.backend.workers)]):
+            for slot, outcome in zip(slots, outcomes):
+                self.store.add(self.campaign, generation, slot, z[slot], self.score([outcome]).margin[0], outcome.episodes, started, outcome.world)
+                done[slot] = outcome
+            self.advance(len(slots))
+        return self.score([done[slot] for slot in range(len(z))])
 
 
 def failure_names(store) -> list[str]:
@@ -42,11 +96,12 @@ def read_estimate(store, name: str) -> fr.Estimate:
     def unfinished(z, seeds):
         raise WorldagentError(f"estimate {name!r} is unfinished in {store.path}; rerun `worldagent failure-rate` with its settings to finish it.")
 
-    evaluate = fr.StoredEvaluate(store, campaign, unfinished, partial(fr.score_worlds, selection))
+    evaluate = StoredEvaluate(store, campaign, unfinished, partial(fr.score_worlds, selection))
     dim = len(first.latent)
     common = dict(seed=campaign.seed, batch=config["batch"], target_width=config.get("target_width"))
     if campaign.optimiser == "is":
         fields = fr.ImportanceConfig.__dataclass_fields__
         importance = fr.ImportanceConfig(**{k: v for k, v in config.items() if k in fields})
-        return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, **common)
+        describe = kept_describer(pool_file(store.path, name), None) if importance.proposal == "surrogate" else None
+        return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, describe=describe, **common)
     return fr.monte_carlo(evaluate, dim, config["worlds"], **common)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from worldagent.analysis.failure_rate import ImportanceConfig
 from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
@@ -34,7 +35,7 @@ def estimate_line(estimate) -> str:
         f"{estimate.hits} hits in {estimate.worlds} worlds, {estimate.episodes} episodes"
     )
     if estimate.method == "is":
-        line += f" ({estimate.search_worlds} worlds searching); ESS {estimate.ess:.0f}, of the hits {estimate.event_ess:.0f}"
+        line += f" ({estimate.search_worlds} worlds learning the proposal); ESS {estimate.ess:.0f}, of the hits {estimate.event_ess:.0f}"
     return line
 
 
@@ -51,9 +52,16 @@ def register(app: typer.Typer) -> None:
         method: str = typer.Option("both", "--method", help="mc (Monte Carlo, exact binomial interval), is (importance sampling) or both."),
         worlds: int = typer.Option(10_000, "--worlds", help="Monte Carlo's worlds; importance sampling's worlds after its search."),
         width: float = typer.Option(None, "--width", help="Stop sampling once the 95% interval is within ±WIDTH of the estimate (0.5: ±50%)."),
-        round_worlds: int = typer.Option(500, "--round-worlds", help="Importance sampling: worlds per round of the search for the proposal."),
-        rounds: int = typer.Option(10, "--rounds", help="Importance sampling: rounds of the search at most."),
-        components: int = typer.Option(8, "--components", help="Importance sampling: shifted priors in the proposal at most (1: one mean shift)."),
+        proposal: str = typer.Option(
+            ImportanceConfig.proposal,
+            "--proposal",
+            help="Importance sampling's proposal: surrogate (a model of the worlds' descriptors) or search (cross-entropy).",
+        ),
+        pool: int = typer.Option(ImportanceConfig.pool, "--pool", help="Surrogate: prior worlds decoded and described (no episode) to draw from."),
+        pilot: int = typer.Option(ImportanceConfig.pilot, "--pilot", help="Surrogate: pool worlds evaluated to fit the model."),
+        round_worlds: int = typer.Option(500, "--round-worlds", help="Search: worlds per round of the search for the proposal."),
+        rounds: int = typer.Option(10, "--rounds", help="Search: rounds of the search at most."),
+        components: int = typer.Option(8, "--components", help="Search: shifted priors in the proposal at most (1: one mean shift)."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         seed: int = typer.Option(0, "--seed", help="Seed of the latents and episodes."),
         out: Path = typer.Option(Path("runs/failure-rate"), "--out", help="Run directory (store.sqlite); a rerun resumes."),
@@ -66,12 +74,12 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """The probability of an event (a failure) for worlds z ~ N(0, I), with a 95% interval and the episodes spent."""
         from worldagent import experiments
-        from worldagent.analysis.failure_rate import ImportanceConfig, check_budget, methods
+        from worldagent.analysis.failure_rate import check_budget, methods
         from worldagent.influence.selection import parse_selection
         from worldagent.store import RunStore
 
-        check_counts(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components)
-        importance = ImportanceConfig(round_worlds=round_worlds, max_rounds=rounds, components=components)
+        check_counts(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components, pool=pool, pilot=pilot)
+        importance = ImportanceConfig(round_worlds=round_worlds, max_rounds=rounds, components=components, proposal=proposal, pool=pool, pilot=pilot)
         methods(method)
         check_budget(worlds, width, importance)
         parse_selection(event, env)  # a bad event fails before the agent and generator load

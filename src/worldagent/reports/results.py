@@ -146,7 +146,7 @@ def atlas_results(spec, store, outputs: dict) -> dict:
     failing and distinct failing worlds, their groups, and each failure-rate estimate replayed."""
     from worldagent.analysis import failure_rate as fr
     from worldagent.analysis.explanations import clusters
-    from worldagent.analysis.stored import read_estimate
+    from worldagent.analysis.stored import campaign_name, read_estimate
     from worldagent.errors import WorldagentError
     from worldagent.influence.selection import parse_selection
     from worldagent.search.atlas import distinct_count, qd_offset, read_atlas
@@ -173,7 +173,7 @@ def atlas_results(spec, store, outputs: dict) -> dict:
         "estimates": {},
     }
     for method in fr.METHODS:
-        name = fr.campaign_name(method, selection.text, atlas.campaign.seed)
+        name = campaign_name(method, selection.text, atlas.campaign.seed)
         if store.campaign(name) is not None:
             try:
                 found["estimates"][method] = read_estimate(store, name)

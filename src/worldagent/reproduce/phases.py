@@ -353,6 +353,7 @@ def influence_summary(result: dict) -> str:
 
 ATLAS_CELLS = 10  # cells per descriptor of the atlas's grid (the spec's default descriptors)
 IMPORTANCE_ROUNDS = 4  # rounds of the importance sampler's search, each of a quarter of failure_worlds
+POOL_PER_WORLD = 20  # the surrogate's pool of described prior worlds, per world it samples (paper racing: 200,000)
 
 
 def atlas_phase(ctx: EnvContext) -> dict:
@@ -397,7 +398,9 @@ def failure_rates(ctx: EnvContext, store, setup) -> dict[str, dict]:
     from worldagent.analysis.failure_rate import ImportanceConfig
 
     worlds = ctx.budgets.failure_worlds
-    importance = ImportanceConfig(round_worlds=max(20, worlds // 4), max_rounds=IMPORTANCE_ROUNDS)
+    importance = ImportanceConfig(
+        round_worlds=max(20, worlds // 4), max_rounds=IMPORTANCE_ROUNDS, pilot=max(20, worlds // 4), pool=POOL_PER_WORLD * worlds
+    )
     found = {}
     for method in ("mc", "is"):
         try:

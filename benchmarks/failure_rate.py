@@ -258,6 +258,35 @@ def run_event(means, setup, selection, reference: dict, mc_cap: int, args, descr
     return row
 
 
+def seed_screen(env: str, args) -> dict:
+    """Importance sampling alone on every event, once per seed of ``--screen-seeds`` (its own pool each): how often
+    its interval covers the brute force, and the episodes it spends."""
+    settings = ENVS[env]
+    setup = experiments.setup(env, settings["agent"], small_generator(env, settings["dataset"], settings["epochs"]), repeats=settings["repeats"])
+    means, dim = metric_means(setup, settings["metric"]), setup.generator.latent_dim
+    values, _ = brute_force(means, dim, int(settings["worlds"] * args.scale), 0, args.cache, f"{env}-{generator_hash(setup.generator)}")
+    describe, rows = Described(distinct_describer(setup.spec, setup.generator)), []
+    for p in PROBABILITIES:
+        threshold = threshold_for(values, p, settings["op"])
+        selection = parse_selection(f"{settings['metric']} {settings['op']} {threshold!r}", env)
+        truth = float(np.mean(selection.clauses[0].holds(values)))
+        needed = mc_worlds_for_width(truth, args.width) * setup.repeats
+
+        def scored(z, seeds, selection=selection):
+            return fr.score_means(selection, {settings["metric"]: means(z, seeds)}, len(z) * setup.repeats)
+
+        for seed in args.screen_seeds:
+            found = fr.importance_sampling(
+                scored, dim, args.is_cap, config=importance_config(args), seed=seed, batch=args.is_batch, target_width=args.width, describe=describe
+            )
+            row = {"target_probability": p, "event": selection.text, "brute_force": truth, "seed": seed, **found.as_dict()}
+            row |= {"covers_brute_force": found.low <= truth <= found.high, "episode_ratio_mc_over_is": round(needed / found.episodes, 1)}
+            rows.append(row)
+            print(f"{env} {selection.text} seed {seed}: {found.estimate:.3g} [{found.low:.3g}, {found.high:.3g}] against {truth:.3g}, "
+                  f"{found.episodes} episodes ({row['episode_ratio_mc_over_is']}x)", flush=True)  # fmt: skip
+    return {"rows": rows, "pool_describe_seconds": round(describe.seconds, 1)}
+
+
 def run_env(env: str, args) -> dict:
     settings = ENVS[env]
     repeats, metric, mc_cap = settings["repeats"], settings["metric"], int(settings["mc_cap"] * args.scale)
@@ -325,7 +354,14 @@ def main() -> None:
     parser.add_argument("--envs", nargs="+", default=["racing", "harvest"])
     parser.add_argument("--cache", type=Path, default=None, help="keep the brute-force values here and reuse them (same G, worlds, seed)")
     parser.add_argument("--brute-force-only", action="store_true", help="only the brute force (to fill --cache); writes no result")
+    parser.add_argument("--screen-seeds", type=int, nargs="+", default=None, help="only importance sampling, once per seed (failure-rate-seeds.json)")
     args = parser.parse_args()
+    if args.screen_seeds:
+        screened = {env: seed_screen(env, args) for env in args.envs}
+        payload = {"benchmark": "failure_rate --screen-seeds", "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": describe_machine()}
+        payload |= {"settings": {**vars(args), "cache": str(args.cache), "importance": importance_config(args).__dict__}, **screened}
+        print("->", write_text(RESULTS / "failure-rate-seeds.json", json.dumps(payload, indent=2) + "\n"), flush=True)
+        return
     start, results = time.perf_counter(), {}
     for env in args.envs:
         began = time.perf_counter()

@@ -256,6 +256,9 @@ def test_an_event_that_never_occurs_is_refused_by_importance_sampling():
     with pytest.raises(WorldagentError) as error:
         fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(round_worlds=100, max_rounds=3, proposal="search"))
     assert "never occurred in the 500 worlds sampled" in one_line(error) and "check the thresholds" in str(error.value)
+    with pytest.raises(WorldagentError) as error:
+        fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(pool=5000))
+    assert "never occurred in the 500 worlds sampled" in one_line(error) and "raise the pilot or the pool" in str(error.value)
     nothing = fr.monte_carlo(never, 10, 500)  # Monte Carlo's answer is an upper bound
     assert (nothing.estimate, nothing.low, nothing.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 500)))
 

@@ -403,9 +403,11 @@ def surrogate_sampling(
 def _weighted_estimate(
     weight: np.ndarray, event: np.ndarray, spend: _Spender, search_worlds: int, best: float, confidence: float, pool: int | None = None
 ) -> Estimate:
-    """Importance sampling's ``Estimate`` from the sampled worlds' weights f64[n] and events bool[n]."""
+    """Importance sampling's ``Estimate`` from the sampled worlds' weights f64[n] and events bool[n] (``pool``: the
+    surrogate's, else the search's)."""
     if not event.any():
-        hint = f"the closest came within {-best:.3g} of it: check the thresholds, or search longer (more rounds or worlds per round)"
+        longer = "search longer (more rounds or worlds per round)" if pool is None else "raise the pilot or the pool"
+        hint = f"the closest came within {-best:.3g} of it: check the thresholds, or {longer}"
         hint = "sample more worlds" if best >= 0 else hint
         raise WorldagentError(f"the event never occurred in the {len(event)} worlds sampled for importance sampling ({hint}).")
     estimate, low, high = weighted_interval(weight * event, confidence, pool)

@@ -107,6 +107,17 @@ TRIED = [
     "under half of a hit world's fresh episodes, and weights fitted on such hits after the fact bias the pooled mean; "
     "not kept (the per-batch estimator above covered harvest 3/3)",
 ]
+# issue 15 item 2, third pass: the surrogate proposal (pool of prior worlds weighted by a model of the descriptors).
+# Screens replayed the sampler on pools of known values (racing 200,000, harvest the 100,000 brute-force worlds), 8 seeds.
+TRIED += [
+    "surrogate, ridge on [1, z, descriptors] fitted once on a 500-world pilot: racing covered 8/8 at 1e-3 (22x), 5/8 at "
+    "1e-4 (154x); harvest 7/8 (3.5x), 7/8 (7.5x)",
+    "the same, refitted after each batch on the proposal's own worlds: racing covered 0/6, estimates 0.45-0.72 P; weighted "
+    "p/q: 6/8 and 6/8; with prior share 0.3: 1/8",
+    "features with cross terms z_i z_j: the pilot overfitted, weights' relative variance 11,733 (racing 1e-3, 0.1x); "
+    "latents only, no descriptors: 631 (2.2x); harvest with boosted trees: covered 0/6, with the map's cells: 2.9x",
+    "kept: ridge on [1, z, z^2, descriptors], fitted once on the pilot: racing 7/8 (22x), 7/8 (154x); harvest 8/8 (3.0x), 8/8 (7.5x)",
+]
 CHUNK = 10_000  # worlds per evaluator call in the brute force
 ARCHIVED = ("search_proposal", "pooled_trial")  # full runs of proposals not kept, carried over from the recorded file
 

@@ -101,7 +101,7 @@ def read_estimate(store, name: str) -> fr.Estimate:
     common = dict(seed=campaign.seed, batch=config["batch"], target_width=config.get("target_width"))
     if campaign.optimiser == "is":
         fields = fr.ImportanceConfig.__dataclass_fields__
-        importance = fr.ImportanceConfig(**{k: v for k, v in config.items() if k in fields})
+        importance = fr.ImportanceConfig(**{"proposal": "search", **{k: v for k, v in config.items() if k in fields}})  # older stores: search
         describe = kept_describer(pool_file(store.path, name), None) if importance.proposal == "surrogate" else None
         return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, describe=describe, **common)
     return fr.monte_carlo(evaluate, dim, config["worlds"], **common)

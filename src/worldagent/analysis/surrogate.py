@@ -75,7 +75,9 @@ def pool_shares(log_chance: np.ndarray, prior_weight: float) -> np.ndarray:
     return prior_weight / len(log_chance) + (1 - prior_weight) * modelled
 
 
-def distinct_describer(spec: Any, generator: Any, names: Sequence[str] | None = None, chunk: int = 10_000) -> Callable[[np.ndarray], np.ndarray]:
+def distinct_describer(
+    spec: Any, generator: Any, names: Sequence[str] | None = None, chunk: int = 10_000, progress: bool = False
+) -> Callable[[np.ndarray], np.ndarray]:
     """``describe(z f64[n, dim]) -> f64[n, k]``: the descriptors of the worlds G(z), each distinct world described once.
 
     G decodes ``chunk`` latents at a time (the last padded, so it compiles once). A repair to a
@@ -84,10 +86,12 @@ def distinct_describer(spec: Any, generator: Any, names: Sequence[str] | None = 
 
     Args:
         names: descriptors of ``spec.metrics.descriptors`` (None: all of them).
+        progress: a progress bar over the latents.
     """
     import jax
     import jax.numpy as jnp
 
+    from worldagent.progress import progress_bar
     from worldagent.search.objectives import generate
 
     names = tuple(spec.metrics.descriptors) if names is None else tuple(names)
@@ -99,18 +103,25 @@ def distinct_describer(spec: Any, generator: Any, names: Sequence[str] | None = 
     def describe(z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, np.float32)
         rows = np.zeros((len(z), len(functions)))
-        for start in range(0, len(z), chunk):
-            part = z[start : start + chunk]
-            padded = np.concatenate([part, np.zeros((chunk - len(part), z.shape[1]), np.float32)])
-            worlds = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[: len(part)], generate(generator, jnp.asarray(padded)))
-            flat = np.concatenate([np.ascontiguousarray(leaf).reshape(len(part), -1).view(np.uint8) for leaf in jax.tree_util.tree_leaves(worlds)], 1)
-            seen: dict[bytes, np.ndarray] = {}
-            for i, row in enumerate(flat):
-                key = row.tobytes()
-                if key not in seen:
-                    world = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], worlds)
-                    seen[key] = np.array([f(world) for f in functions], np.float64)
-                rows[start + i] = seen[key]
+        size = min(chunk, len(z))
+        with progress_bar("describing the pool", total=len(z), enabled=progress) as advance:
+            for start in range(0, len(z), size):
+                rows[start : start + size] = _describe_chunk(z[start : start + size], size)
+                advance(min(size, len(z) - start))
+        return rows
+
+    def _describe_chunk(part: np.ndarray, size: int) -> np.ndarray:
+        """f64[len(part), k] for at most ``size`` latents: G decodes them padded to ``size``."""
+        padded = np.concatenate([part, np.zeros((size - len(part), part.shape[1]), np.float32)])
+        worlds = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[: len(part)], generate(generator, jnp.asarray(padded)))
+        flat = np.concatenate([np.ascontiguousarray(leaf).reshape(len(part), -1).view(np.uint8) for leaf in jax.tree_util.tree_leaves(worlds)], 1)
+        rows, seen = np.zeros((len(part), len(functions))), {}
+        for i, row in enumerate(flat):
+            key = row.tobytes()
+            if key not in seen:
+                world = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], worlds)
+                seen[key] = np.array([f(world) for f in functions], np.float64)
+            rows[i] = seen[key]
         return rows
 
     return describe

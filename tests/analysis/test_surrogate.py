@@ -1,0 +1,47 @@
+"""The surrogate's pool descriptors: G(z) described once per distinct world, kept beside the store and read back."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+from worldagent.analysis import surrogate
+from worldagent.envs import registry
+from worldagent.errors import WorldagentError
+
+
+def test_the_describer_matches_the_specs_descriptors_on_each_world(racing_generator):
+    spec = registry.get("racing")
+    z = np.random.default_rng(0).standard_normal((23, racing_generator.latent_dim))
+    z[5] = z[4]  # one world twice: described once, the same row
+    described = surrogate.distinct_describer(spec, racing_generator, chunk=10)(z)
+    worlds = jax.tree_util.tree_map(np.asarray, racing_generator(z.astype(np.float32)))
+    names = list(spec.metrics.descriptors)
+    for i in (0, 9, 10, 22):  # either side of a chunk's edge, and the padded last chunk
+        world = jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], worlds)
+        np.testing.assert_allclose(described[i], [spec.metrics.descriptors[name](world) for name in names], rtol=1e-6)
+    np.testing.assert_array_equal(described[4], described[5])
+    only = surrogate.distinct_describer(spec, racing_generator, names=["track_length"])(z[:3])
+    np.testing.assert_allclose(only[:, 0], described[:3, names.index("track_length")])
+    with pytest.raises(WorldagentError, match="unknown racing descriptor"):
+        surrogate.distinct_describer(spec, racing_generator, names=["speed"])
+
+
+def test_kept_descriptors_are_read_back_and_a_missing_file_is_refused(tmp_path):
+    calls = []
+
+    def describe(z):
+        calls.append(len(z))
+        return z[:, :1] * 2
+
+    path = surrogate.pool_file(tmp_path / "store.sqlite", "failure-is-return<60-s0")
+    assert path == tmp_path / "pools" / "failure-is-return<60-s0.npy"
+    z = np.arange(12.0).reshape(6, 2)
+    first = surrogate.kept_describer(path, describe)(z)
+    again = surrogate.kept_describer(path, None)(z)  # a replay with no generator reads the file
+    np.testing.assert_array_equal(first, again)
+    np.testing.assert_array_equal(first[:, 0], z[:, 0] * 2)
+    assert calls == [6]
+    with pytest.raises(WorldagentError, match="missing or stale; rerun `worldagent failure-rate`"):
+        surrogate.kept_describer(tmp_path / "pools" / "other.npy", None)(z)

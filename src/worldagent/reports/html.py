@@ -284,7 +284,7 @@ def atlas_section(run_dir: Path, results: dict) -> str:
 
 def probability_table(env: str, found: dict, config: dict) -> str:
     """P(failure) for worlds z ~ N(0, I): each estimator's estimate, 95% interval and cost, replayed from the store."""
-    names = {"mc": "Monte Carlo (exact binomial interval)", "is": "importance sampling (cross-entropy proposal mixed with the prior)"}
+    names = {"mc": "Monte Carlo (exact binomial interval)", "is": "importance sampling (prior worlds weighted by a surrogate of their descriptors)"}
     rows = []
     for method, estimate in found["estimates"].items():
         if isinstance(estimate, str):

@@ -368,10 +368,12 @@ def main() -> None:
     parser.add_argument("--screen-seeds", type=int, nargs="+", default=None, help="only importance sampling, once per seed (failure-rate-seeds.json)")
     args = parser.parse_args()
     if args.screen_seeds:
-        screened = {env: seed_screen(env, args) for env in args.envs}
+        path = RESULTS / "failure-rate-seeds.json"
+        kept = {env: entry for env, entry in (json.loads(path.read_text()) if path.exists() else {}).items() if env in ENVS}
+        screened = {**kept, **{env: {"when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **seed_screen(env, args)} for env in args.envs}}
         payload = {"benchmark": "failure_rate --screen-seeds", "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": describe_machine()}
         payload |= {"settings": {**vars(args), "cache": str(args.cache), "importance": importance_config(args).__dict__}, **screened}
-        print("->", write_text(RESULTS / "failure-rate-seeds.json", json.dumps(payload, indent=2) + "\n"), flush=True)
+        print("->", write_text(path, json.dumps(payload, indent=2) + "\n"), flush=True)  # an env not rerun keeps its entry
         return
     start, results = time.perf_counter(), {}
     for env in args.envs:

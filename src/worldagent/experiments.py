@@ -650,7 +650,10 @@ def failure_rate(
             if name == "is" and importance.proposal == "surrogate":
                 from worldagent.analysis.surrogate import distinct_describer, kept_describer, pool_file
 
-                describe = kept_describer(pool_file(store.path, campaign.name), distinct_describer(setup.spec, setup.generator, progress=progress))
+                path = pool_file(store.path, campaign.name)
+                if next(store.iter_evaluations(campaign.name), None) is None:  # a new campaign: descriptors of this generator
+                    path.unlink(missing_ok=True)
+                describe = kept_describer(path, distinct_describer(setup.spec, setup.generator, progress=progress))
             estimator = partial(fr.importance_sampling, config=importance, describe=describe) if name == "is" else fr.monte_carlo
             found[name] = estimator(evaluate, setup.generator.latent_dim, worlds, seed=seed, batch=fr.BATCH, target_width=target_width)
     return found

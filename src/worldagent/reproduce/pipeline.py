@@ -153,7 +153,8 @@ def store_campaigns(ctx: EnvContext, phases: list[str]) -> list[str]:
     if "compare" in phases:
         found += [n for group in compare_names(ctx).values() for n in group]
     if "atlas" in phases:
-        from worldagent.analysis.failure_rate import METHODS, campaign_name
+        from worldagent.analysis.failure_rate import METHODS
+        from worldagent.analysis.stored import campaign_name
 
         found.append(experiments.atlas_campaign_name(False, ctx.metric, ctx.seed))
         if ctx.spec.failure:

@@ -109,7 +109,7 @@ def test_the_observation_picks_the_training_settings_that_made_it_lap():
         assert rays.quadratic and rays.crash_warmup == 0.5
         assert training_config("racing", algo, options={"observation": "rays"}, crash_warmup=0.0).crash_warmup == 0.0  # overrides win
     acktr = training_config("racing", "acktr", options={"observation": "rays"})
-    assert (acktr.learning_rate, acktr.num_envs) == (1.0, 64) and training_config("racing", "acktr").num_envs == 32
+    assert (acktr.learning_rate, acktr.kl_clip) == (1.0, 0.003) and training_config("racing", "acktr").kl_clip == 0.01
 
 
 def test_spec_option_picks_the_observation():

@@ -14,9 +14,9 @@ PAPER_WINDOW = 16  # the "surroundings" observation's full-resolution window (th
 ROUTELESS_RESPAWN_SPEED = 0.5
 ROUTELESS_SETTINGS = {
     "ppo": {"crash_warmup": 0.5, "quadratic": True},
-    # K-FAC's η_max: 0.25 learnt too slowly. 64 envs: a batch of 1,024 steps per update (gradient and Fisher); with
-    # 32 every η_max, schedule and heading tried left a seed of 5 parked or slow, with 64 all 5 lapped ≥ 0.944.
-    "acktr": {"crash_warmup": 0.5, "quadratic": True, "learning_rate": 1.0, "num_envs": 64},
+    # K-FAC's η_max: 0.25 learnt too slowly. kl_clip: a trust region of 0.003 (ikostrikov's 0.001, our earlier 0.01)
+    # lapped ≥ 0.945 on 5 of 5 seeds; at 0.01 every η_max, schedule and heading tried left a seed parked or slow.
+    "acktr": {"crash_warmup": 0.5, "quadratic": True, "learning_rate": 1.0, "kl_clip": 0.003},
 }
 
 

@@ -52,6 +52,10 @@ def features(z: np.ndarray, described: np.ndarray | None = None) -> np.ndarray:
 def log_chances(pool: np.ndarray, pilot: np.ndarray, margins: np.ndarray) -> np.ndarray:
     """f64[M]: log Φ(margin̂ / σ), each pool world's modelled chance of the event.
 
+    σ is the spread of the pilot's leave-one-out residuals: a pilot with about as many worlds as
+    features fits itself exactly, and its in-sample residuals would make the chances step
+    functions (a 25-world pilot on 25 features put the weights of harvest's quick run on 3 worlds).
+
     Args:
         pool: f64[M, f] features of the worlds to score.
         pilot: f64[m, f] features of the evaluated worlds (from the prior).
@@ -64,8 +68,11 @@ def log_chances(pool: np.ndarray, pilot: np.ndarray, margins: np.ndarray) -> np.
     if finite.sum() < 2:
         raise WorldagentError("the event's metrics are NaN on the pilot's worlds; check the policy and the metrics.")
     x, y = pilot[finite], np.asarray(margins, np.float64)[finite]
-    coefficients = np.linalg.solve(x.T @ x + RIDGE * np.eye(x.shape[1]), x.T @ y)
-    spread = max(float(np.std(y - x @ coefficients)), 1e-9 * (float(np.std(y)) + 1e-300))
+    inverse = np.linalg.inv(x.T @ x + RIDGE * np.eye(x.shape[1]))
+    coefficients = inverse @ (x.T @ y)
+    leverage = np.einsum("ij,jk,ik->i", x, inverse, x)  # the hat matrix's diagonal
+    held_out = (y - x @ coefficients) / np.maximum(1 - leverage, 1e-9)  # leave-one-out residuals, in closed form
+    spread = max(float(np.sqrt(np.mean(held_out**2))), 1e-9 * (float(np.std(y)) + 1e-300))
     return log_ndtr(pool @ coefficients / spread)
 
 

@@ -7,8 +7,8 @@ estimate stays unbiased however poor the cheap model is (a poor one costs varian
 Here the cheap model reads a world's *descriptors* (``EnvSpec.metrics.descriptors``: a track's
 length and curvature, a map's wall share) and its latent, which cost a decode and no episode.
 It is a ridge regression of the event's margin on ``features`` = [1, z, z², standardised
-descriptors], fitted once on a pilot of worlds from the prior; with its residual spread σ it
-gives each world a chance Φ(margin̂ / σ) of being in the event.
+descriptors], fitted once on a pilot of worlds from the prior; with the spread σ of its
+leave-one-out residuals it gives each world a chance Φ(margin̂ / σ) of being in the event.
 
 Why descriptors: a generator that repairs to its dataset's worlds makes an event a union of
 small latent cells, one per track, which a proposal in latent space must find one by one; in

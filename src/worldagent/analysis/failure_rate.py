@@ -18,7 +18,7 @@ closed-form toy (event ``z[0] > 3``) tests them without any environment:
     Monte Carlo's width with 30x fewer episodes at p ~ 1e-3 and 194x at 1e-4, where the search
     below reached 3.3x and 14.5x: the search must find an event's cells in latent space one by
     one, while the descriptors see all of them at once. On harvest, whose event is mostly the
-    episode's luck, 3.1x and 4.1x (docs/failure-rate.md).
+    episode's luck, 4.8x at both (docs/failure-rate.md).
   - ``search``, in two stages:
 
   1. *Search*: the cross-entropy method (Rubinstein & Kroese) learns a mixture of shifted priors

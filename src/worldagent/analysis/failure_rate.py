@@ -15,7 +15,7 @@ closed-form toy (event ``z[0] > 3``) tests them without any environment:
   - ``surrogate`` (the default; ``surrogate_sampling``, ``analysis.surrogate``): a pool of
     prior worlds is decoded and described (no episode); a pilot of them is played and a model
     of the event's margin from the worlds' descriptors weights the pool. On racing it reached
-    Monte Carlo's width with 30x fewer episodes at p ~ 1e-3 and 194x at 1e-4, where the search
+    Monte Carlo's width with 23x fewer episodes at p ~ 1e-3 and 145x at 1e-4, where the search
     below reached 3.3x and 14.5x: the search must find an event's cells in latent space one by
     one, while the descriptors see all of them at once. On harvest, whose event is mostly the
     episode's luck, 4.8x at both (docs/failure-rate.md).

@@ -23,6 +23,7 @@ to the regions it had already drawn and its estimates fell to 0.4-0.7 P with tig
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -134,18 +135,14 @@ def distinct_describer(
     return describe
 
 
-def pool_file(store_path: Any, campaign: str) -> Any:
+def pool_file(store_path: Any, campaign: str) -> Path:
     """Where a failure-rate campaign keeps its pool's descriptors: ``pools/<campaign>.npy`` beside ``store.sqlite``."""
-    from pathlib import Path
-
     return Path(store_path).parent / "pools" / f"{campaign}.npy"
 
 
 def kept_describer(path: Any, describe: Callable[[np.ndarray], np.ndarray] | None) -> Callable[[np.ndarray], np.ndarray]:
     """``describe`` whose answer is saved at ``path`` and read back on a rerun (the store replays an estimate with no
     generator: ``describe`` None then, and a missing file is refused)."""
-    from pathlib import Path
-
     from worldagent.files import write_atomically
 
     path = Path(path)

@@ -89,7 +89,20 @@ def test_monte_carlo_covers_the_toy_and_stops_at_a_target_width():
     assert estimate.low <= p <= estimate.high and estimate.worlds == 20_000 and estimate.episodes == 40_000
     assert (estimate.low, estimate.high) == fr.clopper_pearson(estimate.hits, 20_000)
     early = fr.monte_carlo(lambda z, s: fr.Scored(z[:, 0] - 2, z[:, 0] > 2, len(z)), 10, 20_000, seed=1, batch=500, target_width=0.3)
-    assert early.worlds < 20_000 and early.relative_half_width <= 0.3 and early.hits >= fr.MIN_HITS
+    assert early.hits == fr.hits_for_width(0.3) and early.relative_half_width <= 0.3
+    assert early.worlds < early.episodes <= early.worlds + 500  # stopped at its hit; the rest of that batch was played
+    assert (early.low, early.high) == fr.inverse_binomial(early.hits, early.worlds)
+
+
+def test_stopping_at_the_kth_hit_keeps_the_interval_exact_and_the_estimate_unbiased():
+    p, k = 0.01, fr.hits_for_width(0.5)
+    trials = k + np.random.default_rng(0).negative_binomial(k, p, size=4000)  # trial of the k-th success
+    bounds = np.array([fr.inverse_binomial(k, int(n)) for n in trials])
+    assert np.mean((bounds[:, 0] <= p) & (p <= bounds[:, 1])) >= 0.945
+    assert np.mean((k - 1) / (trials - 1)) == pytest.approx(p, rel=0.03)
+    assert fr.inverse_binomial(k, k)[1] == 1.0
+    with pytest.raises(WorldagentError, match="1 <= k <= n"):
+        fr.inverse_binomial(0, 10)
 
 
 @pytest.mark.parametrize("proposal", fr.PROPOSALS)

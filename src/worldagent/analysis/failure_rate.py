@@ -222,6 +222,41 @@ def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
     return low, high
 
 
+def inverse_binomial(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """The exact interval of a probability when sampling stopped at the k-th success, on trial n.
+
+    The k-th success comes by trial n exactly when n trials hold k or more successes, so
+    P(N <= n) and P(N >= n) are binomial tails and their bounds Beta quantiles. The unbiased
+    estimate under this rule is (k − 1) / (n − 1) (Haldane, 1945).
+
+    Returns:
+        (low, high): high = 1 when k = n.
+    """
+    from scipy.stats import beta
+
+    if isinstance(k, bool) or isinstance(n, bool) or int(k) != k or int(n) != n or not 1 <= k <= n:
+        raise WorldagentError(f"k={k}, n={n}; pass whole numbers with 1 <= k <= n.")
+    _check_confidence(confidence)
+    tail = (1 - confidence) / 2
+    return float(beta.ppf(tail, k, n - k + 1)), 1.0 if k == n else float(beta.ppf(1 - tail, k, n - k))
+
+
+def hits_for_width(target_width: float, confidence: float = 0.95) -> int:
+    """The fewest hits k at which inverse binomial sampling's interval is within ±target_width · P for any rare P.
+
+    For a rare event the interval is [Γ_k(α/2), Γ_k(1 − α/2)] / n, a Gamma(k) quantile pair
+    about the estimate (k − 1) / n, so its relative half-width falls with k alone (±50% at 95%:
+    k = 17). Larger P narrow it.
+    """
+    from scipy.stats import gamma
+
+    tail = (1 - confidence) / 2
+    k = 2
+    while (gamma.ppf(1 - tail, k) - gamma.ppf(tail, k)) / (2 * (k - 1)) > target_width:
+        k += 1
+    return k
+
+
 def weighted_interval(terms: np.ndarray, confidence: float = 0.95, pool: int | None = None) -> tuple[float, float, float]:
     """(mean, low, high) of importance-sampling terms f64[n] = w · 1[event].
 
@@ -273,7 +308,14 @@ def score_worlds(selection: Any, worlds: Sequence) -> Scored:
 def monte_carlo(
     evaluate: Evaluate, dim: int, worlds: int, *, seed: int = 0, batch: int = 1000, confidence: float = 0.95, target_width: float | None = None
 ) -> Estimate:
-    """P(event) from worlds z ~ N(0, I), with the exact binomial interval.
+    """P(event) from worlds z ~ N(0, I), with an exact interval.
+
+    With a fixed number of worlds the interval is Clopper–Pearson's. With ``target_width``,
+    sampling stops at the k-th world in the event, k = ``hits_for_width`` (inverse binomial
+    sampling), and the estimate and its exact interval are those of that stopping rule
+    (``inverse_binomial``). Stopping at the first batch whose Clopper–Pearson interval looked
+    narrow picks batches where the hits came early, so that interval did not hold its level: on
+    harvest at 1e-3 it missed the brute force (docs/failure-rate.md).
 
     Args:
         evaluate: ``(z f64[n, dim], seeds int[n]) -> Scored``.
@@ -282,18 +324,25 @@ def monte_carlo(
         seed: seed of the latents and of every evaluation.
         batch: worlds per call of ``evaluate``.
         confidence: of the interval.
-        target_width: stop once the interval is within ±target_width · P (and ``MIN_HITS`` hits).
+        target_width: stop at the hit that brings the interval within ±target_width · P.
 
     Returns:
         An ``Estimate`` (estimate 0 and high = the interval's bound when no world is in the event).
+        When it stopped at a hit, ``worlds`` counts the worlds up to that hit and ``episodes``
+        all that were played (the rest of its batch too).
     """
     check_budget(worlds, target_width, dim=dim, batch=batch, confidence=confidence)
     rng = np.random.default_rng([seed, MC_STREAM])
     spend, hits = _Spender(evaluate, seed), 0
+    needed = None if target_width is None else hits_for_width(target_width, confidence)
     while spend.worlds < worlds:
-        hits += int(spend(rng.standard_normal((min(batch, worlds - spend.worlds), dim))).event.sum())
-        if _narrow_enough(hits, clopper_pearson(hits, spend.worlds, confidence), hits / spend.worlds, target_width):
-            break
+        before = spend.worlds
+        event = spend(rng.standard_normal((min(batch, worlds - spend.worlds), dim))).event
+        if needed is not None and hits + event.sum() >= needed:
+            stop = before + int(np.flatnonzero(event)[needed - hits - 1]) + 1
+            low, high = inverse_binomial(needed, stop, confidence)
+            return Estimate("mc", (needed - 1) / (stop - 1), low, high, stop, spend.episodes, needed, confidence)
+        hits += int(event.sum())
     low, high = clopper_pearson(hits, spend.worlds, confidence)
     return Estimate("mc", hits / spend.worlds, low, high, spend.worlds, spend.episodes, hits, confidence)
 

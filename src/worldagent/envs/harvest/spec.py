@@ -109,6 +109,38 @@ def apple_clustering(world) -> float:
     return float(neighbours[apples].mean())
 
 
+def apple_distance(world) -> float:
+    """Mean over the four spawns of the walk to the nearest apple (4-moves around walls), cells.
+
+    Near apples are taken early, so it moves sustainability most of the descriptors here
+    (corr 0.68 on 100,000 generated maps, docs/failure-rate.md). A spawn that reaches no apple
+    counts H + W, longer than any walk to one.
+    """
+    walls, apples = np.asarray(world.walls, bool), np.asarray(world.apples, bool)
+    height, width = walls.shape
+    rows, cols = spawn_corners(height, width).T
+    distance = np.full(walls.shape, height + width)
+    reached, step = apples & ~walls, 0
+    while True:  # breadth-first from every apple at once, until every spawn is reached or nothing grows
+        distance[reached & (distance > step)] = step
+        if reached[rows, cols].all():
+            break
+        padded = np.pad(reached, 1)
+        grown = (padded[:-2, 1:-1] | padded[2:, 1:-1] | padded[1:-1, :-2] | padded[1:-1, 2:] | reached) & ~walls
+        if (grown == reached).all():
+            break
+        reached, step = grown, step + 1
+    return float(distance[rows, cols].mean())
+
+
+def largest_patch(world) -> float:
+    """Apples in the largest patch (8-connected): an eaten patch regrows only from apples near it."""
+    from scipy.ndimage import label
+
+    patches, count = label(np.asarray(world.apples, bool), structure=np.ones((3, 3)))
+    return float(np.bincount(patches.ravel())[1:].max()) if count else 0.0
+
+
 def trace(state):
     """(positions i32[4, 2], present bool[4]): agents are off the map while tagged out."""
     return state.position, state.tagged_timer == 0
@@ -181,6 +213,8 @@ SPEC = register(
                 "tagger_separated": tagger_separated,
                 "tagger_isolated": tagger_isolated,
                 "apple_clustering": apple_clustering,
+                "apple_distance": apple_distance,
+                "largest_patch": largest_patch,
             },
             default_descriptors=("wall_share", "apple_clustering"),
         ),

@@ -71,6 +71,11 @@ def test_harvest_descriptors_on_hand_made_maps():
     assert describe["apple_clustering"](block) == 3.0 and describe["apple_clustering"](scattered) == 0.0
     assert describe["wall_share"](block) == pytest.approx(1 / 20) and describe["wall_share"](walled) == pytest.approx(4 / 20)
     assert describe["tagger_isolated"](walled) == 1.0 and describe["tagger_separated"](block) == 0.0
+    # walks to the nearest apple from TL, TR, BL, BR: 0, 3, 2 and 5 (around the wall); a spawn with none in reach: H + W
+    assert describe["apple_distance"](block) == 2.5 and describe["apple_distance"](scattered) == 0.0
+    walled_apple = HarvestMap.from_str("..#..\n###..\n.....\n...A.")
+    assert describe["apple_distance"](walled_apple) == (9 + 4 + 3 + 1) / 4
+    assert describe["largest_patch"](block) == 4.0 and describe["largest_patch"](scattered) == 1.0 and describe["largest_patch"](walled) == 0.0
 
 
 def test_bad_atlas_input_gets_one_line_errors():

@@ -18,9 +18,9 @@ tail is spread finely enough to hold events of probability 1e-2, 1e-3 and 1e-4 (
    the metric, with tail fractions closest to 1e-2, 1e-3 and 1e-4; the brute-force fraction, with
    its exact binomial interval, is the reference.
 2. **Monte Carlo to a width.** ``analysis.failure_rate.monte_carlo`` with ``target_width``: worlds
-   in batches of 1,000 until the 95% interval is within ±width·P (and 10 hits), at most
-   ``mc_cap`` worlds. Beside it, the worlds Monte Carlo needs in expectation at the brute-force P
-   (the Clopper–Pearson width at k = nP).
+   in batches of 1,000 until the hit that brings its exact interval within ±width·P (the 18th at
+   ±50%), at most ``mc_cap`` worlds. Beside it, the worlds Monte Carlo needs in expectation at the
+   brute-force P (the Clopper–Pearson width at k = nP).
 3. **Importance sampling to a width.** ``importance_sampling`` likewise, the search included.
 4. **Monte Carlo at importance sampling's cost**: its interval with the same episodes.
 

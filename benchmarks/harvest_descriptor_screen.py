@@ -132,7 +132,7 @@ def main() -> None:
         spread = column is not None and column.std() > 0
         row = {"added": name, "corr": round(float(np.corrcoef(column, values)[0, 1]), 3) if spread else None}
         rows.append(row | {f"{p:g}": ratio(x, values, p, args.pilots) for p in PROBABILITIES})
-        print(row, rows[-1], flush=True)
+        print(rows[-1], flush=True)
     x = surrogate.features(z, np.stack(list(own.values()), axis=1))
     kept = {"descriptors": list(own), **{f"{p:g}": ratio(x, values, p, args.pilots) for p in PROBABILITIES}}
     print("spec's descriptors:", kept, flush=True)

@@ -172,6 +172,14 @@ def generator_hash(generator) -> str:
     return digest.hexdigest()[:16]
 
 
+def brute_force_draws(dim: int, worlds: int, seed: int):
+    """The brute force's worlds, ``CHUNK`` at a time: (z f64[n, dim], seeds int[n]) from their own stream."""
+    rng = np.random.default_rng([seed, 99])
+    for first in range(0, worlds, CHUNK):
+        n = min(CHUNK, worlds - first)
+        yield rng.standard_normal((n, dim)), rng.integers(0, 2**31, n)
+
+
 def brute_force(means, dim: int, worlds: int, seed: int, cache: Path | None = None, key: str = "") -> tuple[np.ndarray, float]:
     """(f64[worlds], seconds): the metric's per-world means on ``worlds`` worlds z ~ N(0, I) (their own stream and seeds).
 
@@ -183,12 +191,8 @@ def brute_force(means, dim: int, worlds: int, seed: int, cache: Path | None = No
         kept = np.load(path, allow_pickle=False)
         return kept["values"], float(kept["seconds"])
     start = time.perf_counter()
-    rng = np.random.default_rng([seed, 99])
-    chunks = []
-    for first in range(0, worlds, CHUNK):
-        n = min(CHUNK, worlds - first)
-        chunks.append(means(rng.standard_normal((n, dim)), rng.integers(0, 2**31, n)))
-    values, seconds = np.concatenate(chunks), time.perf_counter() - start
+    values = np.concatenate([means(z, seeds) for z, seeds in brute_force_draws(dim, worlds, seed)])
+    seconds = time.perf_counter() - start
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez(path, values=values, seconds=seconds)

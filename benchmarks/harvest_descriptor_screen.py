@@ -42,16 +42,6 @@ from worldagent.search.objectives import generate  # noqa: E402
 PILOT, PROBABILITIES = 500, (1e-3, 1e-4)
 
 
-def latents(worlds: int, dim: int) -> np.ndarray:
-    """The brute force's latents: ``failure_rate.brute_force``'s stream, seed 0, drawn chunk by chunk with its seeds."""
-    rng, chunks = np.random.default_rng([0, 99]), []
-    for first in range(0, worlds, bench.CHUNK):
-        n = min(bench.CHUNK, worlds - first)
-        chunks.append(rng.standard_normal((n, dim)))
-        rng.integers(0, 2**31, n)
-    return np.concatenate(chunks)
-
-
 def walks_from_spawns(walls: np.ndarray) -> np.ndarray:
     """int[n, 4, H, W]: 4-move walks from each spawn around the walls of maps bool[n, H, W] (H + W where none reaches)."""
     n, height, width = walls.shape
@@ -119,7 +109,7 @@ def main() -> None:
     setup = experiments.setup("harvest", settings["agent"], bench.small_generator("harvest", settings["dataset"], settings["epochs"]), repeats=1)
     means, dim = bench.metric_means(setup, settings["metric"]), setup.generator.latent_dim
     values, _ = bench.brute_force(means, dim, args.worlds, 0, args.cache, f"harvest-{bench.generator_hash(setup.generator)}")
-    z = latents(args.worlds, dim)
+    z = np.concatenate([z for z, _ in bench.brute_force_draws(dim, args.worlds, 0)])
     maps = [generate(setup.generator, jnp.asarray(z[i : i + bench.CHUNK], jnp.float32)) for i in range(0, len(z), bench.CHUNK)]
     walls, apples = (np.concatenate([np.asarray(getattr(m, name), bool) for m in maps]) for name in ("walls", "apples"))
     found = candidates(walls, apples)

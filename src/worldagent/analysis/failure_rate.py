@@ -247,7 +247,7 @@ def hits_for_width(target_width: float, confidence: float = 0.95) -> int:
 
     For a rare event the interval is [Γ_k(α/2), Γ_k(1 − α/2)] / n, a Gamma(k) quantile pair
     about the estimate (k − 1) / n, so its relative half-width falls with k alone (±50% at 95%:
-    k = 17). Larger P narrow it.
+    k = 18). Larger P narrow it.
     """
     from scipy.stats import gamma
 

@@ -26,6 +26,11 @@ over envs):
   ``G(z)`` for a fresh ``z ~ N(0, I)``. G runs on ``num_envs`` latents at a time into a stock
   that ended episodes draw from, so its cost is one G evaluation per episode, not per step.
 
+Stable-Baselines3 takes its own ``VecEnv`` class, not Gymnasium's: ``to_sb3(envs)`` adapts one
+(``PPO("MlpPolicy", to_sb3(envs))``; ``envs/sb3.py``). Training-time respawn
+(``params=RacingParams(respawn=True)``) makes every episode last to the lap or the time limit;
+SB3's PPO with its own defaults learns to drive with it (``tests/envs/test_sb3.py``).
+
 Harvest has no vector env here: PettingZoo defines no vector API, and a Gymnasium
 ``VectorEnv`` needs one scalar reward per sub-env where Harvest gives one per agent (``[N, 4]``);
 folding agents into the env axis (SuperSuit's approach) would make the agents' shared world and
@@ -417,3 +422,45 @@ def _world_source(pool, generator, pool_size: int, pool_seed: int, cache_dir) ->
             f"generator= is not a racing generator ({getattr(generator, 'env', type(generator).__name__)}); train one on racing worlds."
         )
     return GeneratorSource(generator)
+
+
+# -- Stable-Baselines3 -----------------------------------------------------------------------------
+
+
+def split_info(info: dict, num_envs: int) -> list[dict]:
+    """Gymnasium's batched info (arrays [N], masked by ``_name`` keys, nested dicts) as one dict per env."""
+    infos: list[dict] = [{} for _ in range(num_envs)]
+    for name, value in info.items():
+        if name.startswith("_"):
+            continue
+        mask = np.asarray(info.get(f"_{name}", np.ones(num_envs, bool)), bool)
+        per_env = split_info(value, num_envs) if isinstance(value, dict) else value
+        for index in np.flatnonzero(mask):
+            infos[index][name] = per_env[index]
+    return infos
+
+
+def sb3_infos(info: dict, terminated: np.ndarray, truncated: np.ndarray) -> list[dict]:
+    """One SB3 info dict per env: the step's info, and for ended episodes ``terminal_observation`` and ``TimeLimit.truncated``."""
+    ended = {name: value for name, value in info.items() if name in ("final_obs", "_final_obs")}
+    infos = split_info({name: value for name, value in info.items() if name not in ended}, len(terminated))
+    for index in np.flatnonzero(np.logical_or(terminated, truncated)):
+        infos[index]["terminal_observation"] = ended["final_obs"][index]
+        infos[index]["TimeLimit.truncated"] = bool(truncated[index] and not terminated[index])
+    return infos
+
+
+def to_sb3(venv: gymnasium.vector.VectorEnv):
+    """``venv`` (e.g. ``gymnasium.make_vec("worldagent/ParticleRacing-v0", ...)``) as a Stable-Baselines3 ``VecEnv``.
+
+    SB3 refuses a Gymnasium ``VectorEnv`` ("not a Gymnasium environment"); this one it trains
+    on: ``PPO("MlpPolicy", to_sb3(venv))``. It is wrapped in SB3's ``VecMonitor`` so training logs
+    episode returns. See ``envs/sb3.py``; needs the ``sb3`` extra.
+    """
+    try:
+        from worldagent.envs.sb3 import monitored
+    except ImportError as error:
+        if error.name is None or not error.name.startswith(("stable_baselines3", "torch")):
+            raise
+        raise WorldagentError(f"to_sb3 needs Stable-Baselines3 ({error.name} is missing): pip install 'worldagent[sb3]'.") from None
+    return monitored(venv)

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from worldagent.errors import WorldagentError
+from worldagent.files import can_create_files_in
 
 SCHEMA_VERSION = 1
 STORE_FILE = "store.sqlite"
@@ -137,6 +138,8 @@ class RunStore:
                 self._create()
             self._check()
         except sqlite3.DatabaseError as error:
+            if not can_create_files_in(path.parent):  # SQLite writes its -wal and -shm files beside the store
+                raise WorldagentError(f"cannot open {path} ({error}): SQLite must write in {path.parent}; make it writable or copy the run directory.") from None
             raise WorldagentError(f"{path} is not a worldagent run store ({error}); point at a store.sqlite written by worldagent.") from None
 
     def _tables(self) -> set[str]:
@@ -168,6 +171,15 @@ class RunStore:
         if row is None or int(row[0]) != SCHEMA_VERSION:
             found = row[0] if row else "none"
             raise WorldagentError(f"{self.path} has store schema version {found}; this worldagent reads version {SCHEMA_VERSION}.")
+
+    def check_intact(self) -> None:
+        """Refuse, in one line, a store with damaged pages (SQLite's quick check), before a run resumes from it."""
+        try:
+            verdict = self.db.execute("PRAGMA quick_check(1)").fetchone()[0]
+        except sqlite3.DatabaseError as error:
+            verdict = str(error)
+        if verdict != "ok":
+            raise WorldagentError(f"{self.path} is damaged ({verdict.splitlines()[-1]}); restore it from a copy or choose another --out.")
 
     def close(self) -> None:
         self.db.close()

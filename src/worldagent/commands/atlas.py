@@ -12,6 +12,10 @@ from worldagent.commands.options import (
     GENERATOR_HELP,
     backend,
     backend_flag,
+    check_counts,
+    check_metric,
+    check_run_dir,
+    check_seed,
     env_argument,
     given_options,
     metric_help,
@@ -19,6 +23,21 @@ from worldagent.commands.options import (
     ray_address_flag,
     stochastic_flag,
 )
+
+
+def check_atlas_request(env: str, objective: str, budget: int, names, cells: int, failure: str | None, repeats: int, seed: int, out: Path) -> None:
+    """Every check of an atlas's options that needs neither the agent nor the generator, run
+    before they load (one line naming the fix)."""
+    from worldagent import experiments
+    from worldagent.envs import registry
+    from worldagent.search.atlas import check_descriptors
+
+    check_counts(budget=budget, repeats=repeats)
+    check_seed(seed)
+    check_metric(env, objective)
+    check_descriptors(registry.get(env), names, cells, budget)
+    experiments.failure_selection(failure, env)
+    check_run_dir(out)
 
 
 def register(app: typer.Typer) -> None:
@@ -33,7 +52,9 @@ def register(app: typer.Typer) -> None:
         objective: str = typer.Option("reward", "--objective", help=metric_help()),
         minimize: bool = typer.Option(True, "--minimize/--maximize", help="Keep each cell's lowest (failures) or highest value."),
         budget: int = typer.Option(2100, "--budget", help="Worlds to evaluate (whole generations of 21)."),
-        descriptors: str = typer.Option(None, "--descriptors", help="1-3 comma-separated world descriptors (`worldagent envs` lists them)."),
+        descriptors: str = typer.Option(
+            None, "--descriptors", help="1-3 comma-separated world descriptors (default: the env's; `worldagent envs` lists each env's)."
+        ),
         cells: int = typer.Option(10, "--cells", help="Cells per descriptor."),
         failure: str = typer.Option(None, "--failure", help='Which worlds fail, e.g. "crash_rate > 0.5", to count distinct failing worlds.'),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
@@ -52,6 +73,7 @@ def register(app: typer.Typer) -> None:
         from worldagent.store import RunStore
 
         names = [n.strip() for n in descriptors.split(",")] if descriptors else None
+        check_atlas_request(env, objective, budget, names, cells, failure, repeats, seed, out)
         setup = experiments.setup(
             env,
             agent,

@@ -14,6 +14,9 @@ from worldagent.commands.options import (
     backend,
     backend_flag,
     check_counts,
+    check_metric,
+    check_run_dir,
+    check_seed,
     env_argument,
     given_options,
     metric_help,
@@ -64,6 +67,9 @@ def register(app: typer.Typer) -> None:
         from worldagent.store import RunStore
 
         check_counts(worlds=worlds, repeats=repeats)
+        check_seed(seed)
+        metric = check_metric(env, metric)
+        check_run_dir(out)
         setup = experiments.setup(
             env,
             agent,
@@ -74,7 +80,6 @@ def register(app: typer.Typer) -> None:
             repeats=repeats,
             backend=backend(backend_name, ray_address),
         )
-        metric = setup.spec.metrics.resolve(metric, setup.spec.name)
         with RunStore(out) as store:
             evaluations = experiments.random_evaluation(store, setup, metric, worlds=worlds, seed=seed, progress=not quiet)
         name = experiments.campaign_names(metric, seed)["random"]

@@ -7,8 +7,9 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import env_argument
+from worldagent.commands.options import DATASET_CAP, PICTURE_CAP, check_counts, check_seed, env_argument
 from worldagent.errors import WorldagentError
+from worldagent.files import check_writable
 
 QUALITY_FILE = "quality.json"
 
@@ -30,9 +31,10 @@ def repair_settings(texts: list[str]) -> dict:
 
 
 def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed: int, config, repair: dict, progress: bool):
-    """Train the VAE (resuming a checkpoint in ``out``), save G(z); returns the trained VAE."""
+    """Train the VAE (resuming a checkpoint in ``out``), save G(z); returns (the trained VAE, the
+    repair's settings, defaults included). The repair is made first: bad settings cost no training."""
     from worldagent.worlds.dataset import WorldDataset, make_dataset
-    from worldagent.worlds.generator import build_generator, save_generator
+    from worldagent.worlds.generator import build_generator, make_repair, save_generator
     from worldagent.worlds.vae import train_vae
 
     if dataset_path is None:
@@ -40,9 +42,10 @@ def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed
         if not dataset_path.exists():
             make_dataset(env, n, seed, progress=progress).save(dataset_path)
     data = WorldDataset.load(dataset_path, env=env)
+    repaired = make_repair(data, repair)
     vae = train_vae(data, config, progress=progress, checkpoint_dir=out)
-    save_generator(out, vae, dataset_path, build_generator(vae, data, repair))
-    return vae
+    save_generator(out, vae, dataset_path, build_generator(vae, data, repair=repaired))
+    return vae, dict(repaired.config)
 
 
 def quality_figures(directory: Path, samples: int, seed: int) -> dict:
@@ -106,9 +109,13 @@ def register(app: typer.Typer) -> None:
             epochs = registry.get(env).presets.get("paper", {}).get("vae_epochs", VAEConfig.epochs)
         config = VAEConfig(latent_dim=latent, beta=beta, learning_rate=learning_rate, batch_size=batch_size, epochs=epochs)
         config.validate()
-        vae = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet)
+        check_counts(caps={"n": DATASET_CAP}, n=n)
+        check_seed(seed)
+        check_writable(out, folder=True)
+        vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet)
         last = vae.history[-1]
-        console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}")
+        repair_note = ", ".join(f"{name}={value}" for name, value in used.items()) or "no settings"
+        console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}; repair: {repair_note}")
 
     @group.command("show")
     @friendly_errors
@@ -123,8 +130,10 @@ def register(app: typer.Typer) -> None:
         from worldagent.worlds.generator import load_generator
         from worldagent.worlds.pictures import reconstruction_sheet, traversal_sheet
 
-        generator, vae, data = load_generator(directory)
+        check_counts(caps={"count": PICTURE_CAP}, count=count)
         out = out or directory
+        check_writable(out, folder=True)
+        generator, vae, data = load_generator(directory)
         indices = vae.holdout_indices[:count] if len(vae.holdout_indices) else np.arange(min(count, len(data)))
         paths = [traversal_sheet(generator, out / "traversals.png"), reconstruction_sheet(generator, data, indices, out / "reconstructions.png")]
         console.print("wrote " + ", ".join(str(p) for p in paths))
@@ -141,6 +150,9 @@ def register(app: typer.Typer) -> None:
 
         from worldagent.files import write_text
 
+        check_counts(samples=samples)
+        check_seed(seed)
+        check_writable(directory / QUALITY_FILE, folder=False)
         figures = quality_figures(directory, samples, seed)
         write_text(directory / QUALITY_FILE, json.dumps(figures, indent=1))
         typer.echo(json.dumps(figures, indent=1))

@@ -1,10 +1,13 @@
-"""Options the commands share: the environment argument, ``--option``, ``--agent``, counts.
+"""Options the commands share: the environment argument, ``--option``, ``--agent``, and the checks of
+counts, seeds, metrics and run directories that every command runs before anything heavy loads.
 
 Help texts that list environments are built from the registry when a command registers, so an
 environment registered by a plugin shows up in ``--help`` with no edit here.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import typer
 
@@ -75,11 +78,57 @@ def given_options(env: str, texts: list[str]) -> dict:
     return registry.get(env).parse_options(list(texts), fill=False)
 
 
-def check_counts(**counts: int) -> None:
-    """Each named count must be at least 1 (one-line error naming the option)."""
+# The most of each count a command accepts: far above any real use (the paper: 8 episodes per
+# world, 10,000 worlds, budgets of a few thousand), low enough that a stray digit fails at once
+# instead of running for days or exhausting memory.
+COUNT_CAPS = {"repeats": 1_000, "worlds": 10_000_000, "budget": 10_000_000, "random_worlds": 10_000_000, "seeds": 1_000, "samples": 1_000_000}
+DATASET_CAP = 1_000_000  # worlds in a dataset (100x the paper's; racing's take about 12 GB)
+PICTURE_CAP = 256  # worlds or episodes drawn on one picture (a 16 x 16 sheet)
+MAX_SEED = 2**31 - 1  # seeds reach jax.random.key, which keeps 32 bits, and worlds SEED + i must too
+
+
+def check_counts(caps: dict[str, int] | None = None, **counts: int) -> None:
+    """Each named count must be at least 1 and at most its cap (``caps``, else ``COUNT_CAPS``);
+    one-line error naming the option."""
     for option, value in counts.items():
+        flag = f"--{option.replace('_', '-')}"
         if value < 1:
-            raise WorldagentError(f"--{option.replace('_', '-')} is {value}; it must be at least 1.")
+            raise WorldagentError(f"{flag} is {value}; it must be at least 1.")
+        cap = {**COUNT_CAPS, **(caps or {})}.get(option)
+        if cap is not None and value > cap:
+            raise WorldagentError(f"{flag} is {value:,}, above the cap of {cap:,}; use at most {cap:,}.")
+
+
+def check_seed(seed: int, option: str = "--seed") -> None:
+    """A seed is an integer from 0 to ``MAX_SEED`` (one-line error naming the option)."""
+    if not 0 <= seed <= MAX_SEED:
+        raise WorldagentError(f"{option} is {seed}; seeds are integers from 0 to {MAX_SEED:,}.")
+
+
+def check_metric(env: str, name: str) -> str:
+    """The canonical metric ``name`` names for ``env`` ("reward": the main one); unknown names are refused."""
+    spec = registry.get(env)
+    return spec.metrics.resolve(name, spec.name)
+
+
+def check_optimiser(name: str) -> None:
+    """``--optimiser``: one of the search optimisers."""
+    from worldagent.search.optimisers import OPTIMISERS
+
+    if name not in OPTIMISERS:
+        raise WorldagentError(f"unknown optimiser {name!r}; use one of: {', '.join(OPTIMISERS)}.")
+
+
+def check_run_dir(out: Path) -> None:
+    """A run directory ``--out``, before anything heavy loads: it can be written, and a store
+    already in it opens and is intact (a rerun resumes from it)."""
+    from worldagent.files import check_writable
+    from worldagent.store import STORE_FILE, RunStore
+
+    check_writable(out, folder=True)
+    if (Path(out) / STORE_FILE).exists():
+        with RunStore(out, create=False) as store:
+            store.check_intact()
 
 
 def algorithm(env: str, algo: str | None) -> str:

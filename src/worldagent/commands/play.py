@@ -7,8 +7,9 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import AGENT_HELP, env_argument, given_options, option_flag
+from worldagent.commands.options import AGENT_HELP, PICTURE_CAP, check_counts, check_seed, env_argument, given_options, option_flag
 from worldagent.errors import WorldagentError
+from worldagent.files import check_writable
 
 
 def play_episodes(env: str, agent: str, seed: int, key: int, episodes: int, out: Path, options: list[str], greedy: bool = False):
@@ -29,8 +30,10 @@ def play_episodes(env: str, agent: str, seed: int, key: int, episodes: int, out:
     spec = registry.get(env)
     if out.suffix.lower() != ".png":
         raise WorldagentError(f"cannot draw episodes as {out.suffix or 'a file without extension'}; use .png.")
-    if episodes < 1 or seed < 0:
-        raise WorldagentError(f"--episodes {episodes}, --seed {seed}: play at least one episode on a non-negative seed.")
+    check_counts(caps={"episodes": PICTURE_CAP}, episodes=episodes)
+    check_seed(seed)
+    check_seed(key, "--key")
+    check_writable(out, folder=False)
     if spec.pictures.episodes is None:
         raise WorldagentError(f"{spec.name} registers no trajectory picture (pictures.episodes); it cannot be drawn here.")
     parsed = agent_options(spec, agent, given_options(env, options))

@@ -12,6 +12,11 @@ from worldagent.commands.options import (
     GENERATOR_HELP,
     backend,
     backend_flag,
+    check_counts,
+    check_metric,
+    check_optimiser,
+    check_run_dir,
+    check_seed,
     env_argument,
     given_options,
     metric_help,
@@ -52,6 +57,11 @@ def register(app: typer.Typer) -> None:
         from worldagent import experiments
         from worldagent.store import RunStore
 
+        check_counts(budget=budget, repeats=repeats)
+        check_seed(seed)
+        check_metric(env, objective)
+        check_optimiser(optimiser)
+        check_run_dir(out)
         setup = experiments.setup(
             env,
             agent,

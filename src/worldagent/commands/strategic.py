@@ -17,6 +17,10 @@ from worldagent.commands.options import (
     backend,
     backend_flag,
     check_counts,
+    check_metric,
+    check_optimiser,
+    check_run_dir,
+    check_seed,
     env_argument,
     given_options,
     metric_help,
@@ -70,6 +74,10 @@ def register(app: typer.Typer) -> None:
         from worldagent.store import RunStore
 
         check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
+        check_seed(seed)
+        metric = check_metric(env, metric)
+        check_optimiser(optimiser)
+        check_run_dir(out)
         setup = experiments.setup(
             env,
             agent,
@@ -80,7 +88,6 @@ def register(app: typer.Typer) -> None:
             repeats=repeats,
             backend=backend(backend_name, ray_address),
         )
-        metric = setup.spec.metrics.resolve(metric, setup.spec.name)
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=seed, progress=not quiet)
             found = experiments.strategic_evaluation(store, setup, metric, budget=budget, seed=seed, optimiser=optimiser, progress=not quiet)
@@ -125,8 +132,11 @@ def register(app: typer.Typer) -> None:
 
         check_counts(budget=budget, seeds=seeds, random_worlds=random_worlds, repeats=repeats)
         names = optimiser_names(optimisers)
-        if 0 <= random_seed < seeds:
+        check_seed(random_seed, "--random-seed")
+        if random_seed < seeds:
             raise WorldagentError(f"--random-seed {random_seed} is one of the optimisers' seeds (0 to {seeds - 1}); pick one outside them.")
+        metric = check_metric(env, metric)
+        check_run_dir(out)
         setup = experiments.setup(
             env,
             agent,
@@ -137,7 +147,6 @@ def register(app: typer.Typer) -> None:
             repeats=repeats,
             backend=backend(backend_name, ray_address),
         )
-        metric = setup.spec.metrics.resolve(metric, setup.spec.name)
         maximize = not minimize
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=random_seed, progress=not quiet)

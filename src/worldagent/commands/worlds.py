@@ -7,8 +7,9 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import env_argument
+from worldagent.commands.options import PICTURE_CAP, check_counts, check_seed, env_argument
 from worldagent.errors import WorldagentError
+from worldagent.files import check_writable
 
 
 def draw_worlds(env: str, n: int, seed: int, out: Path) -> Path:
@@ -20,8 +21,9 @@ def draw_worlds(env: str, n: int, seed: int, out: Path) -> Path:
     spec = registry.get(env)
     if n < 1:
         raise WorldagentError(f"--n is {n}; ask for at least one world.")
-    if seed < 0:
-        raise WorldagentError(f"--seed is {seed}; seeds are non-negative.")
+    check_counts(caps={"n": PICTURE_CAP}, n=n)
+    check_seed(seed)
+    check_writable(out, folder=False)
     if spec.pictures.sheet is None:
         raise WorldagentError(f"{spec.name} registers no picture sheet (pictures.sheet); it cannot be drawn here.")
     return spec.pictures.sheet(spec.generate(np.arange(seed, seed + n, dtype=np.int64)), out)

@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from worldagent.errors import WorldagentError
+
 
 def nearest_index(logits: jax.Array, cells: jax.Array) -> jax.Array:
     """i32[B]: index of the dataset cells most probable under each row of logits f32[B, D]."""
@@ -36,8 +38,9 @@ class NearestWorld:
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> NearestWorld:
-        """The repair over a ``WorldDataset``'s worlds (``config`` is unused: nothing to set)."""
-        del config
+        """The repair over a ``WorldDataset``'s worlds; it has no settings, so any ``config`` is refused."""
+        if config:
+            raise WorldagentError(f"the nearest-world repair of {dataset.env} has no settings (given: {', '.join(config)}); drop --repair.")
         return cls(jnp.asarray(dataset.cells, jnp.float32), jax.tree_util.tree_map(jnp.asarray, dataset.worlds))
 
     @property

@@ -88,7 +88,26 @@ def _repair_config(meta: Mapping[str, Any]) -> dict:
     return {"apples": meta["apples"]} if meta.get("apples") else {}
 
 
-def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None) -> Generator:
+def make_repair(dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None) -> Any:
+    """The environment's repair for ``dataset`` (``EnvSpec.repair``), given only the settings named
+    (None or ``{}``: its defaults); its ``config`` holds them all. ``generator train`` calls it
+    before the VAE trains, so bad settings cost no training.
+
+    A repair refuses unknown names and bad values with a ``WorldagentError``; one that raises
+    ``TypeError``, ``ValueError`` or ``KeyError`` instead is reported in one line too.
+    """
+    spec = registry.get(dataset.env)
+    settings = dict(repair_config or {})
+    try:
+        return spec.repair(dataset, settings)
+    except WorldagentError:
+        raise
+    except (TypeError, ValueError, KeyError) as error:
+        given = ", ".join(f"{name}={value!r}" for name, value in settings.items()) or "none"
+        raise WorldagentError(f"{spec.name}'s repair refuses its settings ({given}): {error}; fix or drop --repair.") from None
+
+
+def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None, repair: Any = None) -> Generator:
     """G(z) from a trained VAE and the dataset it was trained on.
 
     Args:
@@ -96,13 +115,14 @@ def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mappi
         dataset: its training dataset (the repair may map to its worlds or measure them).
         repair_config: settings of the environment's repair (e.g. ``{"apples": K}`` for harvest);
             None or ``{}``: the repair's defaults.
+        repair: a repair already made for ``dataset`` (``make_repair``), instead of ``repair_config``.
     """
     if vae.env != dataset.env or vae.fingerprint != dataset.fingerprint:
         raise WorldagentError(
             f"the VAE was trained on {vae.env} dataset {vae.fingerprint}, not on this {dataset.env} dataset {dataset.fingerprint}; "
             "pass the dataset it was trained on."
         )
-    repair = registry.get(dataset.env).repair(dataset, dict(repair_config or {}))
+    repair = repair if repair is not None else make_repair(dataset, repair_config)
     return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape))
 
 

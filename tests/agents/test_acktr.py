@@ -10,9 +10,10 @@ from worldagent.agents import algorithms
 from worldagent.agents.acktr import ACKTRConfig, make_train
 from worldagent.agents.distributions import world_distribution
 from worldagent.envs.racing.env import ParticleRacing
+from worldagent.envs.racing.spec import RACING_SETTINGS, training_params
 from worldagent.errors import WorldagentError
 
-TINY = ACKTRConfig(total_episodes=100_000, num_envs=8, num_steps=8, kl_clip=0.01, hidden=(32, 32))
+TINY = ACKTRConfig(**RACING_SETTINGS, total_episodes=100_000, num_envs=8, num_steps=8, ent_coef=0.001, kl_clip=0.01, hidden=(32, 32))
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +24,7 @@ def setup():
 
 def test_acktr_raises_the_return_on_a_fixed_track_set(setup):
     env, params, pool = setup
-    trainer = make_train(TINY, env, params, pool)
+    trainer = make_train(TINY, env, params, pool, training_params)
     state, curve = trainer.train_chunk(trainer.init(jax.random.key(0)), 1000)
     returns = np.asarray(curve["return"])
     before, after = np.nanmean(returns[:50]), np.nanmean(returns[-50:])

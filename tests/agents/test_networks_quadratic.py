@@ -9,9 +9,10 @@ import numpy as np
 from worldagent.agents.distributions import WorldPool
 from worldagent.agents.networks import ActorCritic, build_network, network_config, quadratic_features
 from worldagent.agents.policy import network_policy
-from worldagent.agents.ppo import PPOConfig, make_train, warmed_params
+from worldagent.agents.ppo import PPOConfig, make_train
 from worldagent.envs.core import rollout
 from worldagent.envs.racing.env import ParticleRacing, RacingParams, episode_metrics
+from worldagent.envs.racing.spec import RACING_SETTINGS, training_params
 
 
 def test_quadratic_features_are_the_inputs_and_their_pairwise_products():
@@ -33,19 +34,20 @@ def test_quadratic_actor_critic_round_trips_through_its_config():
 
 def test_crash_penalty_warms_up_over_the_given_fraction():
     params = RacingParams()
-    assert warmed_params(params, 0.0, jnp.float32(0.0)) is params
+    assert training_params(params, PPOConfig(), jnp.float32(0.0)).crash_penalty == params.crash_penalty
+    warming = PPOConfig(crash_warmup=0.3)
     for fraction, expected in ((0.0, 0.0), (0.15, 150.0), (0.3, 300.0), (0.9, 300.0)):
-        np.testing.assert_allclose(warmed_params(params, 0.3, jnp.float32(fraction)).crash_penalty, expected, rtol=1e-6)
+        np.testing.assert_allclose(training_params(params, warming, jnp.float32(fraction)).crash_penalty, expected, rtol=1e-6)
 
 
 def test_ppo_with_quadratic_inputs_learns_on_road_rays(racing_pool):
     """A tiny budget on 4 tracks: the agent on the rays observation stays on the road far longer than at the start."""
     env = ParticleRacing(observation="rays", reach=64)
     config = PPOConfig(
-        total_episodes=900, num_envs=16, num_steps=64, hidden=(32, 32), anneal_lr=False, learning_rate=3e-3, quadratic=True
+        **RACING_SETTINGS, total_episodes=900, num_envs=16, num_steps=64, hidden=(32, 32), anneal_lr=False, learning_rate=3e-3, quadratic=True
     )  # fmt: skip
     pool = WorldPool.create(jax.tree_util.tree_map(lambda x: x[:4], racing_pool.worlds))
-    trainer = make_train(config, env, env.default_params, pool)
+    trainer = make_train(config, env, env.default_params, pool, training_params)
     start = trainer.init(jax.random.key(0))
     state, _ = trainer.train_chunk(start, 40)
 

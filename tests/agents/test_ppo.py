@@ -9,12 +9,14 @@ from worldagent.agents.policy import network_policy
 from worldagent.agents.ppo import PPOConfig, make_train, max_updates
 from worldagent.envs.core import rollout
 from worldagent.envs.racing.env import episode_metrics
+from worldagent.envs.racing.spec import RACING_SETTINGS, training_params
 from worldagent.errors import WorldagentError
 
-# The learning test's budget: a few dozen updates, a few seconds of training.
+# The learning test's budget: a few dozen updates, a few seconds of training (with racing's settings: its spec's).
 LEARN = PPOConfig(
-    total_episodes=900, num_envs=16, num_steps=64, num_minibatches=4, update_epochs=4, hidden=(32, 32), anneal_lr=False, learning_rate=3e-3
-)
+    **RACING_SETTINGS, total_episodes=900, num_envs=16, num_steps=64, num_minibatches=4, update_epochs=4, hidden=(32, 32), anneal_lr=False,
+    learning_rate=3e-3,
+)  # fmt: skip
 
 
 def _mean_returns(env, network, stacked_params, worlds, key):
@@ -33,7 +35,7 @@ def _mean_returns(env, network, stacked_params, worlds, key):
 
 def test_ppo_raises_return_on_fixed_tracks_for_two_seeds(racing_env, racing_pool):
     pool = WorldPool.create(jax.tree_util.tree_map(lambda x: x[:4], racing_pool.worlds))
-    trainer = make_train(LEARN, racing_env, racing_env.default_params, pool)
+    trainer = make_train(LEARN, racing_env, racing_env.default_params, pool, training_params)
     starts = jax.vmap(trainer.init)(jax.random.split(jax.random.key(0), 2))
     states, curves = jax.vmap(lambda s: trainer.train_chunk(s, 60))(starts)  # two seeds at once
     both = jax.tree_util.tree_map(lambda a, b: np.concatenate([a, b]), starts.params, states.params)

@@ -1,14 +1,20 @@
 """The training algorithms, one table: name -> config class, ``make_train``, saved network kind.
 
-Every command, reproduce phase and influencing experiment picks its algorithm and config here::
+Every command, reproduce phase and influencing experiment picks its algorithm and config here.
+A config is the algorithm's defaults (its papers'), then the env's departures
+(``EnvSpec.training_settings``), then the caller's fields (the CLI's ``--set``)::
 
     config = training_config(spec, episodes=500)         # the spec's default algorithm (racing: ppo)
     config = training_config(spec, "acktr", num_envs=8)  # another algorithm, a field overridden
+    settings = parse_settings(["ppo.learning_rate=1e-3"], ["ppo"])  # {"ppo": {"learning_rate": 0.001}}
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import dataclasses
+import types
+import typing
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +31,8 @@ class Algorithm:
         name: "ppo", "acktr", "dqn".
         config_type: its frozen config dataclass (``configs.JsonConfig``: ``budget_field``,
             ``with_episodes``, ``to_dict``/``from_dict``).
-        make_train: ``make_train(config, env, env_params, distribution) -> trainer.Trainer``.
+        make_train: ``make_train(config, env, env_params, distribution, training_params=None) ->
+            trainer.Trainer`` (``training_params``: the env's ``EnvSpec.training_params``).
         network_kind: the saved agent's architecture name (``networks.NETWORKS``).
     """
 
@@ -59,7 +66,7 @@ def training_config(
         algo: one of ``spec.algorithms``; default ``spec.default_algorithm``.
         episodes: the episode budget (PPO/ACKTR ``total_episodes``, DQN ``num_episodes``).
         base: a config to start from (default: the algorithm's defaults with the env's
-            ``spec.algorithm_overrides[algo]`` and ``spec.option_overrides(algo, options)``).
+            departures, ``spec.training_settings(algo, options)``).
         options: the env options the agent trains with (default: the env's defaults).
         **overrides: config fields to set last (unknown ones are refused).
 
@@ -72,8 +79,7 @@ def training_config(
     if algo not in spec.algorithms:
         raise WorldagentError(f"{spec.name} trains with {', '.join(spec.algorithms)}, not {algo}; pick one of those.")
     if base is None:
-        tuned = spec.option_overrides(algo, spec.check_options(options)) if spec.option_overrides else {}
-        config = algorithm.config_type().replace(**{**spec.algorithm_overrides.get(algo, {}), **tuned})
+        config = algorithm.config_type().replace(**spec.training_settings(algo, options))
     elif isinstance(base, algorithm.config_type):
         config = base
     else:
@@ -81,3 +87,75 @@ def training_config(
     if episodes is not None:
         config = config.with_episodes(episodes)
     return config.replace(**overrides) if overrides else config
+
+
+# -- ``--set NAME=VALUE``: config fields from the command line -------------------------------------
+
+_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+
+
+def _expected(hint: Any) -> str:
+    """How to write a value of type ``hint``, for error messages."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if type(None) in typing.get_args(hint):
+        return f"{_expected(args[0])} or none"
+    if typing.get_origin(hint) is tuple:
+        return f"comma-separated {_expected(args[0]).removeprefix('an ').removeprefix('a ')}s, e.g. 64,64"
+    return {bool: "true or false", int: "an integer", float: "a number", str: "text"}.get(hint, str(hint))
+
+
+def _parse_value(text: str, hint: Any) -> Any:
+    """``text`` as a value of type ``hint`` (bool, int, float, str, tuples of those, optional ones); ValueError if it is not."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return None if text.lower() in ("none", "null") else _parse_value(text, args[0])
+    if typing.get_origin(hint) is tuple:
+        parts = [part.strip() for part in text.strip().strip("()[]").split(",")]
+        if not all(parts):
+            raise ValueError(text)
+        return tuple(_parse_value(part, args[0]) for part in parts)
+    if hint is bool:
+        if text.lower() not in _TRUE + _FALSE:
+            raise ValueError(text)
+        return text.lower() in _TRUE
+    if hint in (int, float, str):
+        return hint(text)
+    raise ValueError(f"no parser for {hint}")
+
+
+def parse_settings(texts: Iterable[str], algos: Iterable[str]) -> dict[str, dict[str, Any]]:
+    """Config fields from ``NAME=VALUE`` texts (the CLI's ``--set``), each parsed to its field's type.
+
+    ``NAME`` sets that field of every algorithm in ``algos`` whose config has it; ``ALGO.NAME``
+    only of ``ALGO``. A name no algorithm in ``algos`` has, or a value of the wrong type, is
+    refused in one line naming the valid fields or the expected type.
+
+    Args:
+        texts: the ``--set`` texts, e.g. ``["learning_rate=1e-3", "ppo.hidden=64,64"]``.
+        algos: the algorithms the run trains (``train``: one; ``reproduce``: each env's).
+
+    Returns:
+        ``{algo: {field: value}}`` for every algorithm in ``algos`` (empty where nothing is set).
+    """
+    algos = list(dict.fromkeys(algos))
+    settings: dict[str, dict[str, Any]] = {algo: {} for algo in algos}
+    for text in texts:
+        name, sep, value = text.partition("=")
+        prefix, dot, field_name = name.strip().rpartition(".")
+        if not sep or not field_name:
+            raise WorldagentError(f"--set {text!r}: write NAME=VALUE, e.g. --set learning_rate=1e-3 (or ALGO.NAME=VALUE).")
+        if dot and prefix not in algos:
+            raise WorldagentError(f"--set {text!r}: this run trains {', '.join(algos)}, not {prefix!r}; write NAME=VALUE or one of those as ALGO.")
+        targets = [prefix] if dot else algos
+        hints = {algo: typing.get_type_hints(get_algorithm(algo).config_type) for algo in targets}
+        having = [algo for algo in targets if field_name in hints[algo]]
+        if not having:
+            valid = sorted({f.name for algo in targets for f in dataclasses.fields(get_algorithm(algo).config_type)})
+            raise WorldagentError(f"--set {text!r}: {'/'.join(targets)} has no setting {field_name!r}; valid: {', '.join(valid)}.")
+        for algo in having:
+            hint = hints[algo][field_name]
+            try:
+                settings[algo][field_name] = _parse_value(value.strip(), hint)
+            except ValueError:
+                raise WorldagentError(f"--set {text!r}: {algo} {field_name} takes {_expected(hint)}.") from None
+    return settings

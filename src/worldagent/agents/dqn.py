@@ -257,7 +257,7 @@ def episode_row(metrics: dict) -> dict:
     return row
 
 
-def make_train(config: DQNConfig, env, env_params, distribution) -> Trainer:
+def make_train(config: DQNConfig, env, env_params, distribution, training_params=None) -> Trainer:
     """Independent DQN on ``env`` with each episode's world drawn from ``distribution``.
 
     Args:
@@ -266,6 +266,9 @@ def make_train(config: DQNConfig, env, env_params, distribution) -> Trainer:
         env_params: its params (episode length ``env_params.max_steps``; e.g. who may TAG).
         distribution: a world distribution (``distributions.py``), passed to the jitted
             functions as an argument.
+        training_params: the env's ``EnvSpec.training_params``, ``(params, config, fraction) ->
+            params``, applied at the start of every episode (``config``'s budget is the shared
+            core's, not the run's); None: ``env_params`` as they are (harvest).
 
     Returns:
         A ``trainer.Trainer`` whose update is one episode of every env. Curve rows: ``active``,
@@ -278,20 +281,30 @@ def make_train(config: DQNConfig, env, env_params, distribution) -> Trainer:
         raise WorldagentError(f"config is a {type(config).__name__}; pass a DQNConfig.")
     check_env(env)
     # the core is shared by every budget, so the budget-dependent decay is fixed here
-    init, update = _core(config.replace(num_episodes=1, epsilon_decay_episodes=config.decay_episodes), env, int(env_params.max_steps))
-    return budgeted_trainer(init, update, config.num_episodes, config.num_chunks, q_network(config, env), (env_params, distribution))
+    core_config = config.replace(num_episodes=1, epsilon_decay_episodes=config.decay_episodes)
+    init, update = _core(core_config, env, int(env_params.max_steps), training_params or _unchanged_params)
+    consts = (env_params, distribution, jnp.float32(config.num_episodes))
+    return budgeted_trainer(init, update, config.num_episodes, config.num_chunks, q_network(config, env), consts)
+
+
+def _unchanged_params(env_params, config, fraction):
+    """The ``training_params`` of an env whose spec declares none: its params as they are."""
+    del config, fraction
+    return env_params
 
 
 @functools.lru_cache(maxsize=16)
-def _core(config: DQNConfig, env, episode_length: int):
-    """``init(key, consts)`` and ``update(state, consts)`` (one episode of every env); consts = (env_params, distribution)."""
+def _core(config: DQNConfig, env, episode_length: int, training_params):
+    """``init(key, consts)`` and ``update(state, consts)`` (one episode of every env); consts =
+    (env_params, distribution, f32 episode budget): the budget is an argument, so every budget shares the compilation."""
     network, optimizer = q_network(config, env), _optimizer(config)
     num_envs, num_agents, obs_shape = config.num_envs, env.num_agents, tuple(env.observation_shape)
     min_filled = max(2, -(-config.learning_starts // num_envs))
     reset_all = jax.vmap(env.reset, in_axes=(0, 0, None))
 
     def init(key: jax.Array, consts) -> DQNState:
-        env_params, distribution = consts
+        env_params, distribution, _ = consts
+        env_params = training_params(env_params, config, jnp.float32(0.0))
         key_params, key_worlds, key_reset, key_run = jax.random.split(key, 4)
         params = init_params(key_params, config, env)
         worlds = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
@@ -331,7 +344,8 @@ def _core(config: DQNConfig, env, episode_length: int):
     def update(state: DQNState, consts) -> tuple[DQNState, dict]:
         # One episode of every env, then every env restarts on a world drawn here (one draw per
         # episode, not per step: G(z) is costly). The episode's metrics are read before the reset.
-        env_params, distribution = consts
+        env_params, distribution, budget = consts
+        env_params = training_params(env_params, config, jnp.clip(state.episodes / budget, 0.0, 1.0))
         key, key_worlds, key_reset, key_steps = jax.random.split(jax.random.wrap_key_data(state.key), 4)
         state, trace = jax.lax.scan(lambda s, k: env_step(s, k, env_params), state, jax.random.split(key_steps, episode_length))
         metrics = jax.vmap(env.metrics)(state.env_state)

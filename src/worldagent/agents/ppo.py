@@ -35,13 +35,12 @@ from worldagent.errors import WorldagentError
 
 @dataclass(frozen=True)
 class PPOConfig(JsonConfig):
-    """PPO settings; the defaults are the paper's racing budget (10,000 episodes).
-
-    What the defaults reach (``benchmarks/train_racing.py``, 2 CPU cores): see the README's
-    measured figures. Two choices make racing learnable at this budget (both in the env, see
-    ``envs/racing/env.py``): the route sensor in the observation (or, without a route, the
-    "rays" observation with its heading, plus ``crash_warmup`` and ``quadratic``; see
-    ``docs/racing.md``), and respawn-on-crash while training (``respawn``). Without them the agent parks before the first bend (a parked
+    """PPO settings. The defaults are PPO's usual ones (Schulman et al. 2017, PureJaxRL's), with
+    the paper's budget of 10,000 episodes: rewards unscaled, no respawn, no warm-up. An env
+    declares its departures in its spec (``EnvSpec.training_settings``; ``--set`` on the CLI
+    overrides both). Racing's (``envs/racing/spec.py``) are ``reward_scale=0.01`` and
+    ``respawn``, and without the route sensor ``crash_warmup`` and ``quadratic``
+    (``docs/racing.md``): without respawn the agent parks before the first bend (a parked
     episode, −60, beats the −300 crashes that learning to corner costs) whatever else was tried
     (entropy 0.03, γ 0.995, centring shaping, a CNN on the window, penalty curricula).
 
@@ -59,17 +58,19 @@ class PPOConfig(JsonConfig):
         ent_coef: weight of the entropy bonus.
         vf_coef: weight of the value loss.
         max_grad_norm: global gradient-norm clip.
-        reward_scale: rewards are multiplied by this for learning only (racing's returns span
-            −360..100; 0.01 brings value targets near unit scale). Logged returns stay raw.
+        reward_scale: rewards are multiplied by this for learning only (racing: 0.01, as its
+            returns span −360..100). Logged returns stay raw.
         clip_value: clip the value update to ``clip_eps`` around the old values.
         hidden: hidden layer widths of each actor-critic torso (see ``networks.py``).
         activation: "tanh" or "relu".
-        respawn: train with ``RacingParams.respawn``: a crash costs its penalty and the agent
-            carries on from the centreline, so every episode teaches up to 300 steps
-            (evaluation keeps the paper's rule: a crash ends the episode).
-        crash_warmup: fraction of the episode budget over which the training crash penalty
-            (``crash_penalty``, where the env params have one) ramps linearly from 0 to its
-            value; 0: the full penalty from the start. Evaluation always pays the full penalty.
+        respawn: train with the env's respawn-on-failure, where its spec has one
+            (``EnvSpec.training_params``; racing: a crash costs its penalty and the agent carries
+            on from the centreline, so every episode teaches up to 300 steps). Evaluation keeps
+            the paper's rule: a crash ends the episode.
+        crash_warmup: fraction of the episode budget over which the env's training failure
+            penalty ramps linearly from 0 to its value, where its spec has one (racing: the crash
+            penalty); 0: the full penalty from the start. Evaluation always pays the full penalty.
+        quadratic: the networks read the observation and its pairwise products (``networks.py``).
     """
 
     total_episodes: int = 10_000
@@ -85,11 +86,11 @@ class PPOConfig(JsonConfig):
     ent_coef: float = 0.01
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
-    reward_scale: float = 0.01
+    reward_scale: float = 1.0
     clip_value: bool = False
     hidden: tuple[int, ...] = (128, 128)
     activation: str = "tanh"
-    respawn: bool = True
+    respawn: bool = False
     crash_warmup: float = 0.0
     quadratic: bool = False
 
@@ -144,18 +145,10 @@ class TrainState:
     env_steps: jax.Array
 
 
-def training_params(env_params, respawn: bool):
-    """The env params a learner trains under: respawn-on-crash set as configured, where params have it."""
-    return env_params.replace(respawn=respawn) if hasattr(env_params, "respawn") else env_params
-
-
-def warmed_params(env_params, crash_warmup: float, fraction: jax.Array):
-    """The env params at ``fraction`` of the budget: ``crash_penalty`` (where the params have one)
-    ramped from 0 over the first ``crash_warmup`` of it, so a learner first finds that driving
-    pays before crashes teach it to stop (see ``PPOConfig.crash_warmup``)."""
-    if not crash_warmup or not hasattr(env_params, "crash_penalty"):
-        return env_params
-    return env_params.replace(crash_penalty=env_params.crash_penalty * jnp.clip(fraction / crash_warmup, 0.0, 1.0))
+def unchanged_params(env_params, config, fraction):
+    """The ``training_params`` of an env whose spec declares none: its params as they are."""
+    del config, fraction
+    return env_params
 
 
 def max_updates(total_episodes: int, num_envs: int, num_steps: int, max_episode_steps: int) -> int:
@@ -169,39 +162,41 @@ def update_row(state: TrainState, summary: dict, **stats) -> dict:
     return curve_row({"active": 1.0, "episodes": state.episodes, "env_steps": state.env_steps, **episodes, **stats})
 
 
-def make_train(config: PPOConfig, env, env_params, distribution) -> Trainer:
+def make_train(config: PPOConfig, env, env_params, distribution, training_params=None) -> Trainer:
     """PPO on ``env`` with each episode's world drawn from ``distribution``.
 
     Args:
         config: ``PPOConfig``.
         env: a single-agent env with flat observations (e.g. Particle Racing).
-        env_params: its params; ``config.respawn`` sets ``respawn`` where the params have it.
+        env_params: its params.
         distribution: a world distribution (``distributions.py``), passed to the jitted
             functions as an argument.
+        training_params: the env's ``EnvSpec.training_params``, ``(params, config, fraction) ->
+            params`` applied on every update (where ``respawn`` and ``crash_warmup`` take
+            effect); None: ``env_params`` as they are.
 
     Returns:
         A ``trainer.Trainer``; ``train(key)`` is vmappable over keys (seeds).
     """
-    return single_agent_trainer("PPO", PPOConfig, _core, config, env, env_params, distribution)
+    return single_agent_trainer("PPO", PPOConfig, _core, config, env, env_params, distribution, training_params)
 
 
-def single_agent_trainer(name: str, config_type: type, core, config, env, env_params, distribution) -> Trainer:
-    """The ``Trainer`` of an actor-critic (PPO, ACKTR) whose ``core(config, env)`` gives
-    ``(init, update, network)``: checks the config and the env, applies ``respawn`` and budgets updates."""
+def single_agent_trainer(name: str, config_type: type, core, config, env, env_params, distribution, training_params=None) -> Trainer:
+    """The ``Trainer`` of an actor-critic (PPO, ACKTR) whose ``core(config, env, training_params)``
+    gives ``(init, update, network)``: checks the config and the env and budgets updates."""
     if not isinstance(config, config_type):
         raise WorldagentError(f"config is a {type(config).__name__}; {name} takes its {config_type.__name__}.")
     if getattr(env, "num_agents", 1) != 1:
         raise WorldagentError(f"{name} trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
-    env_params = training_params(env_params, config.respawn)
     budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
-    init, update, network = core(config, env)
+    init, update, network = core(config, env, training_params or unchanged_params)
     return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution))
 
 
 @functools.lru_cache(maxsize=16)
-def _core(config: PPOConfig, env):
+def _core(config: PPOConfig, env, training_params):
     """``init(key, consts)``, ``update(state, consts)`` and the network; consts = (env_params, distribution).
-    Cached, so trainers of the same config and env share their compilation."""
+    Cached, so trainers of the same config, env and ``training_params`` share their compilation."""
     network = ActorCritic(env.num_actions, config.hidden, config.activation, config.quadratic)
     tx = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam(eps=1e-5))
     batch = config.num_envs * config.num_steps
@@ -211,7 +206,7 @@ def _core(config: PPOConfig, env):
         params_env, distribution = consts
         key_net, key_env, key_run = jax.random.split(key, 3)
         params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
-        runner = init_runner(key_env, env, params_env, distribution, config.num_envs)
+        runner = init_runner(key_env, env, training_params(params_env, config, jnp.float32(0.0)), distribution, config.num_envs)
         zero = jnp.int32(0)
         return TrainState(params, tx.init(params), runner, raw_key(key_run), zero, zero, zero)
 
@@ -253,7 +248,7 @@ def _core(config: PPOConfig, env):
         params_env, distribution = consts
         key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
         fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
-        params_env = warmed_params(params_env, config.crash_warmup, fraction)
+        params_env = training_params(params_env, config, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
         flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731

@@ -1,6 +1,8 @@
 """The trainer contract every algorithm meets (DESIGN.md "Trainer"), PureJaxRL style.
 
-``make_train(config, env, params, distribution) -> Trainer``::
+``make_train(config, env, params, distribution, training_params=None) -> Trainer``, where
+``training_params`` is the env's ``EnvSpec.training_params`` (the params a learner trains
+under, e.g. racing's respawn-on-crash; the host driver passes it)::
 
     trainer = make_train(config, env, params, distribution)
     state, curve = trainer.train(key)                     # the whole run, one jitted call

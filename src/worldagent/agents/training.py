@@ -205,7 +205,8 @@ def train(
         seed: the run's seed (becomes the PRNG key here).
         options: the env's options (e.g. harvest ``{"tagger": (0,)}``).
         params: the env params to train under (default: those ``spec.make_env(options)`` gives);
-            an experiment passes the params it evaluates with, so both see the same env.
+            an experiment passes the params it evaluates with, so both see the same env. The
+            trainer applies ``spec.training_params`` to them (racing: respawn, crash warm-up).
         progress: show a progress bar (episodes).
         resume: continue from ``out_dir``'s checkpoint if there is one (it must be the same
             algorithm, env, options, config and seed); otherwise start afresh (overwriting it).
@@ -233,7 +234,7 @@ def train(
         _check_resumable(out_dir, run)
     env, env_params = spec.make_env(options)
     env_params = env_params if params is None else params
-    trainer = algorithm.make_train(config, env, env_params, distribution)
+    trainer = algorithm.make_train(config, env, env_params, distribution, spec.training_params)
     state = trainer.init(jax.random.key(seed))
     rows, resumed_from = [], None
     if resuming:

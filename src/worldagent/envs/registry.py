@@ -150,10 +150,18 @@ class EnvSpec:
         pictures: see ``Pictures``.
         scripted: ``name -> ((env, params) -> ScriptedPolicy)``: hand-written agents.
         algorithms: training algorithms that fit this env (first: the default).
-        algorithm_overrides: ``algo -> {config field: value}`` this env's settings of an algorithm.
-        option_overrides: ``(algo, options) -> {config field: value}``: settings that depend on
+        algorithm_overrides: ``algo -> {config field: value}``: this env's departures from an
+            algorithm's defaults (which are the algorithm's own, e.g. PPO ``reward_scale=1``,
+            ``respawn=False``), whatever the options (racing: ``reward_scale=0.01``, ``respawn``).
+        option_overrides: ``(algo, options) -> {config field: value}``: departures that depend on
             the env options, applied after ``algorithm_overrides`` (racing: an agent without the
-            route sensor learns with quadratic inputs and a crash warm-up); None: none.
+            route sensor learns with quadratic inputs and a crash warm-up); None: none. The
+            commands read both through ``training_settings``; ``--set`` overrides them.
+        training_params: ``(params, config, fraction) -> params``: the env params a learner
+            trains under, given its algorithm config and ``fraction`` (f32, traced) of its episode
+            budget done; trainers call it on every update. Only the env knows which of its
+            params training changes (racing: respawn-on-crash as ``config.respawn``, the crash
+            penalty ramped over ``config.crash_warmup``). None: training uses ``params`` as they are.
         presets: ``preset name -> {budget field: value}``: the budgets of ``worldagent reproduce``.
         reproduce_options: the ``make`` options ``worldagent reproduce`` uses (harvest: tagger 0).
         selection: the paper's influencing selection (``"crash_rate > 0.5"``).
@@ -185,6 +193,7 @@ class EnvSpec:
     algorithms: tuple[str, ...] = ()
     algorithm_overrides: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     option_overrides: Callable[[str, Mapping[str, Any]], Mapping[str, Any]] | None = None
+    training_params: Callable[[Any, Any, Any], Any] | None = None
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     reproduce_options: Mapping[str, Any] = field(default_factory=dict)
     selection: str = ""
@@ -238,6 +247,14 @@ class EnvSpec:
     def make_env(self, options: Mapping[str, Any] | None = None) -> tuple[Any, Any]:
         """``(env, params)`` for ``options`` (checked, defaults filled in)."""
         return self.make(self.check_options(options))
+
+    # -- training ----------------------------------------------------------------------------
+
+    def training_settings(self, algo: str, options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """This env's departures from ``algo``'s default config for ``options`` (checked, defaults
+        filled in): ``algorithm_overrides[algo]``, then ``option_overrides(algo, options)`` on top."""
+        tuned = self.option_overrides(algo, self.check_options(options)) if self.option_overrides else {}
+        return {**self.algorithm_overrides.get(algo, {}), **tuned}
 
     # -- worlds ------------------------------------------------------------------------------
 

@@ -174,6 +174,51 @@ def test_bad_agents_get_one_line_errors(in_module_dir, agent, obs_batch, message
     assert "\n" not in str(error.value)
 
 
+BROKEN_MODULES = {
+    "syntax_mod": ("def act(obs)\n    return obs\n", r"agent module 'syntax_mod' failed to import: SyntaxError: .*; fix the module"),
+    "raising_mod": ("raise RuntimeError('no GPU here')\n", r"agent module 'raising_mod' failed to import: RuntimeError: no GPU here; fix the module"),
+    "exiting_mod": ("import sys\nsys.exit(3)\n", r"agent module 'exiting_mod' failed to import: it called sys.exit\(3\)"),
+    "needy_mod": ("import no_such_dependency\n", r"agent module 'needy_mod' imports 'no_such_dependency', which is not installed; install it"),
+}
+
+
+@pytest.mark.parametrize("module", sorted(BROKEN_MODULES))
+def test_an_agent_module_that_fails_to_import_is_named_with_its_error(tmp_path, monkeypatch, module):
+    source, message = BROKEN_MODULES[module]
+    (tmp_path / f"{module}.py").write_text(source)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(WorldagentError, match=message) as error:
+        load_agent("racing", f"{module}:act")
+    assert "\n" not in str(error.value) and "PYTHONPATH" not in str(error.value)
+
+
+def test_an_agent_that_calls_sys_exit_gets_a_one_line_error(tmp_path, monkeypatch):
+    (tmp_path / "quitting_mod.py").write_text("import sys\n\ndef act(obs):\n    sys.exit(3)\n")
+    monkeypatch.chdir(tmp_path)
+    agent = load_agent("racing", "quitting_mod:act")
+    with pytest.raises(WorldagentError, match=r"callable quitting_mod:act failed on observations .*: it called sys.exit\(3\)"):
+        agent(np.zeros((2, *RACING.observation_shape), np.float32))
+
+
+def test_a_model_zip_that_is_not_a_zip_is_called_so(tmp_path):
+    (tmp_path / "model.zip").write_text("not a zip")
+    with pytest.raises(WorldagentError, match=r"model.zip is not a zip file; pass the .zip a Stable-Baselines3 model's save\(\) writes"):
+        load_agent("racing", tmp_path / "model.zip")
+
+
+def test_external_agents_run_on_a_bounded_number_of_threads(tmp_path, monkeypatch):
+    import onnxruntime
+
+    from worldagent.agents import external
+
+    opened = []
+    real = onnxruntime.InferenceSession
+    monkeypatch.setattr(onnxruntime, "InferenceSession", lambda path, options, **kwargs: opened.append(options) or real(path, options, **kwargs))
+    load_agent("racing", onnx_model(tmp_path / "m.onnx", RACING.observation_shape, 4))
+    assert [(o.intra_op_num_threads, o.inter_op_num_threads) for o in opened] == [(external.AGENT_THREADS, external.AGENT_THREADS)]
+    assert external.AGENT_THREADS == 1
+
+
 def test_an_onnx_model_for_other_observations_is_refused(tmp_path):
     path = onnx_model(tmp_path / "small.onnx", (7,), 4)
     with pytest.raises(WorldagentError, match=r"takes input of shape \[None, 7\]; this env's observations are \[B, 20\]"):
@@ -219,6 +264,8 @@ def test_search_and_evaluate_random_accept_external_agents(in_module_dir, racing
 def test_a_stable_baselines3_model_plays_through_the_host_evaluator(tmp_path, tracks):
     """Needs the `sb3` extra (torch); skipped without it."""
     sb3 = pytest.importorskip("stable_baselines3")
+    import torch
+
     from worldagent.envs.adapters import ParticleRacingGym
 
     model = sb3.PPO("MlpPolicy", ParticleRacingGym(pool_size=4, cache_dir=tmp_path), n_steps=64, batch_size=32, seed=0)
@@ -226,6 +273,7 @@ def test_a_stable_baselines3_model_plays_through_the_host_evaluator(tmp_path, tr
     model.save(tmp_path / "ppo.zip")
     agent = load_agent("racing", tmp_path / "ppo.zip")
     assert agent.source.kind == "sb3" and agent.host
+    assert torch.get_num_threads() == 1  # external agents run on one thread (external.AGENT_THREADS)
     metrics = evaluate(RACING, agent, tracks, 2, jax.random.key(0), SHORT)
     obs = np.zeros((3, *RACING.observation_shape), np.float32)
     np.testing.assert_array_equal(agent(obs), model.predict(obs, deterministic=True)[0])

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import sys
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,9 +73,8 @@ class HostPolicy:
             out = self.fn(fed)
         except WorldagentError:
             raise
-        except Exception as error:  # the user's code: say whose, in one line
-            first = (str(error).splitlines() or [""])[0][:200]
-            raise WorldagentError(f"{self.name} failed on observations of shape {fed.shape} ({fed.dtype}): {type(error).__name__}: {first}") from None
+        except (Exception, SystemExit) as error:  # the user's code (sys.exit too): say whose, in one line
+            raise WorldagentError(f"{self.name} failed on observations of shape {fed.shape} ({fed.dtype}): {one_line(error)}") from None
         out = np.asarray(out)
         if self.per_agent and multi and out.ndim >= 1 and out.shape[0] == batch * self.num_agents:
             out = out.reshape(batch, self.num_agents, *out.shape[1:])
@@ -125,7 +125,19 @@ def _sample(keys: jax.Array, logits: np.ndarray, num_agents: int) -> jax.Array:
     return _sample_one(keys, logits) if num_agents == 1 else _sample_agents(keys, logits)
 
 
+def one_line(error: BaseException) -> str:
+    """``Type: first line of the message`` (at most 200 characters), for one-line errors about the user's code."""
+    if isinstance(error, SystemExit):
+        return f"it called sys.exit({error.code!r})"
+    return f"{type(error).__name__}: {(str(error).splitlines() or [''])[0][:200]}"
+
+
 # -- loaders -------------------------------------------------------------------------------------
+
+# External agents run torch and ONNX Runtime on one intra-op thread. Their batches are small
+# MLP forward passes, which more threads barely speed up, while on a busy machine the threads
+# contend with JAX's (a Stable-Baselines3 agent ran 5-10x slower with torch's default on 2 cores).
+AGENT_THREADS = 1
 
 
 def is_callable_reference(text: str) -> bool:
@@ -155,15 +167,27 @@ def _import_callable(text: str, home: str | None = None) -> tuple[Callable, str 
     try:
         module = importlib.import_module(module_name)
     except ImportError as error:
-        raise WorldagentError(
-            f"cannot import {module_name!r} for agent {text!r} ({error}); run from its directory or add it to PYTHONPATH."
-        ) from None
+        if is_missing(module_name, error):
+            raise WorldagentError(
+                f"cannot import {module_name!r} for agent {text!r} ({error}); run from its directory or add it to PYTHONPATH."
+            ) from None
+        if isinstance(error, ModuleNotFoundError) and error.name:
+            raise WorldagentError(f"agent module {module_name!r} imports {error.name!r}, which is not installed; install it.") from None
+        raise WorldagentError(f"agent module {module_name!r} failed to import: {one_line(error)}; fix the module.") from None
+    except (Exception, SystemExit) as error:  # a syntax error, or the module's own code raising (or exiting) on import
+        raise WorldagentError(f"agent module {module_name!r} failed to import: {one_line(error)}; fix the module.") from None
     fn: Any = module
     for part in attribute.split("."):
         fn = getattr(fn, part, None)
     if not callable(fn):
         raise WorldagentError(f"{module_name} has no callable {attribute!r}; pass module:function with a function obs batch -> actions.")
     return fn, getattr(module, "__file__", None)
+
+
+def is_missing(module_name: str, error: ImportError) -> bool:
+    """Whether ``error`` says ``module_name`` itself (or a package above it) is not found, not something it imports."""
+    missing = getattr(error, "name", None)
+    return isinstance(error, ModuleNotFoundError) and missing is not None and (module_name + ".").startswith(missing + ".")
 
 
 def load_onnx(path: str | Path, env: Any, stochastic: bool = False) -> HostPolicy:
@@ -187,8 +211,10 @@ def _open_onnx(path: Path) -> tuple[Callable, list]:
         import onnxruntime
     except ImportError:
         raise WorldagentError("ONNX agents need onnxruntime: pip install 'worldagent[onnx]'.") from None
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = options.inter_op_num_threads = AGENT_THREADS
     try:
-        session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+        session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
     except Exception as error:
         raise WorldagentError(f"{path} is not a valid ONNX model ({(str(error).splitlines() or [''])[0][:160]}).") from None
     inputs = session.get_inputs()
@@ -231,10 +257,14 @@ def _open_sb3(path: Path) -> Any:
     """The Stable-Baselines3 model in ``path`` (trying each discrete-action algorithm)."""
     if not path.is_file():
         raise WorldagentError(f"no Stable-Baselines3 model at {path}; pass the path of a model .zip.")
+    if not zipfile.is_zipfile(path):
+        raise WorldagentError(f"{path} is not a zip file; pass the .zip a Stable-Baselines3 model's save() writes.")
     try:
         import stable_baselines3
+        import torch
     except ImportError:
         raise WorldagentError("Stable-Baselines3 agents need it installed: pip install 'worldagent[sb3]'.") from None
+    torch.set_num_threads(AGENT_THREADS)
     errors = []
     for name in SB3_ALGORITHMS:
         try:

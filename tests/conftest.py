@@ -43,11 +43,31 @@ SMALL_VAE = VAEConfig(encoder=(128, 64), decoder=(64, 128), epochs=30, batch_siz
 
 # Folders whose files share an expensive session fixture (a whole reproduce run) run on one worker.
 SHARED_FIXTURE_FOLDERS = ("reproduce",)
+WORKERS = 2  # CI has 2 cores
+
+
+def xdist_loaded(config) -> bool:
+    return config.pluginmanager.hasplugin("xdist")
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook turns -n into workers
+def pytest_cmdline_main(config):
+    """Plain ``pytest`` runs on WORKERS xdist workers grouped by file (``--dist loadgroup``); an
+    explicit ``-n``/``--dist`` wins. Here rather than in addopts, which would make ``-p no:xdist``
+    a usage error."""
+    if not xdist_loaded(config) or hasattr(config, "workerinput") or config.getoption("usepdb", False):
+        return
+    if config.option.numprocesses is None:
+        config.option.numprocesses = WORKERS
+    if config.option.dist == "no":
+        config.option.dist = "loadgroup"
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
-def pytest_collection_modifyitems(items):
+def pytest_collection_modifyitems(config, items):
     """Put each test file, or each folder of SHARED_FIXTURE_FOLDERS, on one xdist worker."""
+    if not xdist_loaded(config):
+        return  # no workers to group (and no xdist_group marker registered)
     for item in items:
         path = item.path.relative_to(Path(__file__).parent)
         group = path.parts[0] if path.parts[0] in SHARED_FIXTURE_FOLDERS else str(path)

@@ -16,6 +16,7 @@ from worldagent.commands.options import (
     env_argument,
     given_options,
     option_flag,
+    set_flag,
     stochastic_flag,
 )
 
@@ -71,14 +72,18 @@ def influence_command(
     quiet: bool,
     stochastic: bool = False,
     search: str = "cmaes",
+    settings: list[str] | tuple[str, ...] = (),
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
+    from worldagent.agents.algorithms import parse_settings, training_config
     from worldagent.influence.selection import parse_selection
 
     selection = parse_selection(select, env)  # before anything slow: a typo costs nothing
     algo = algorithm(env, algo)
     check_counts(seeds=seeds)
     options = given_options(env, option)
+    chosen = parse_settings(settings, [algo])[algo]
+    training_config(env, algo, episodes, options=options, **chosen)  # a bad value is refused before the agent and generator load
 
     from rich.console import Console
 
@@ -86,6 +91,8 @@ def influence_command(
     from worldagent.reports.influence import influence_figure
 
     setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, stochastic=stochastic, repeats=repeats)
+    # with --set, the config of the options the agents train with (the saved agent's fill those not given)
+    config = training_config(setup.spec, algo, episodes, options=setup.options, **chosen) if chosen else None
     result = experiments.influence(
         out,
         setup,
@@ -97,6 +104,7 @@ def influence_command(
         search_budget=search_budget,
         search=search,
         eval_worlds=eval_worlds,
+        config=config,
         seed=seed,
         greedy=greedy,
         progress=not quiet,
@@ -132,6 +140,7 @@ def register(app: typer.Typer) -> None:
         eval_worlds: int = typer.Option(200, "--eval-worlds", help="Random G(z) worlds every trained agent is evaluated on (the same for all)."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         option: list[str] = option_flag(),
+        settings: list[str] = set_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the candidate, search and evaluation worlds."),
         out: Path = typer.Option(Path("runs/influence"), "--out", help="Run directory; rerun to resume or reuse finished steps."),
         greedy: bool = typer.Option(False, "--greedy", help="Actor-critics act by argmax instead of sampling."),
@@ -158,4 +167,5 @@ def register(app: typer.Typer) -> None:
             quiet,
             stochastic,
             search,
+            settings,
         )

@@ -45,6 +45,17 @@ def option_flag():
     return typer.Option([], "--option", help=OPTION_HELP)
 
 
+SET_HELP = (
+    "A training setting NAME=VALUE: any field of the algorithm's config (repeatable), e.g. --set learning_rate=1e-3 --set hidden=64,64; "
+    "applied over the algorithm's defaults and the environment's departures from them. The resolved config is recorded in the run directory."
+)
+
+
+def set_flag(help: str = SET_HELP):
+    """The repeatable ``--set NAME=VALUE`` (a field of the training algorithm's config)."""
+    return typer.Option([], "--set", help=help)
+
+
 def stochastic_flag():
     """``--stochastic``: external agents sample from their logits."""
     return typer.Option(False, "--stochastic", help=STOCHASTIC_HELP)

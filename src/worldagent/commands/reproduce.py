@@ -7,6 +7,13 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors, status_line
+from worldagent.commands.options import set_flag
+
+REPRODUCE_SET_HELP = (
+    "A training setting NAME=VALUE (repeatable): sets that field of the config of every env's algorithm that has it; "
+    "ALGO.NAME=VALUE only for agents trained with ALGO, e.g. --set ppo.learning_rate=1e-3. Over the algorithm's defaults and the env's own "
+    "settings; the agent and influence phases record it, and changing it redoes them."
+)
 
 
 def register(app: typer.Typer) -> None:
@@ -29,20 +36,24 @@ def register(app: typer.Typer) -> None:
             "--restart",
             help="Redo this phase (and what depends on it): dataset, generator, agent, random, strategic, compare, influence. Repeatable.",
         ),
+        settings: list[str] = set_flag(REPRODUCE_SET_HELP),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
     ) -> None:
         """Run the paper end to end: datasets, generators, agents, random and strategic evaluation, ES vs BO, influencing; then the HTML report."""
+        from worldagent.agents.algorithms import parse_settings
         from worldagent.reproduce.pipeline import reproduce as run
         from worldagent.reproduce.pipeline import resolve_envs
         from worldagent.reproduce.presets import get_preset
 
         chosen = get_preset(preset).with_algo(algo)
+        envs = resolve_envs(env, chosen)
+        chosen = chosen.with_settings(parse_settings(settings, [chosen.algo_of(name) for name in envs]))
         if show:
             typer.echo(chosen.show())
             return
         out = out or Path("runs") / chosen.name
-        manifest = run(chosen, out, resolve_envs(env, chosen), restart=restart, progress=not quiet, echo=status_line)
+        manifest = run(chosen, out, envs, restart=restart, progress=not quiet, echo=status_line)
         failed = [key for key, entry in manifest.data["phases"].items() if entry.get("status") == "failed"]
         if failed:
             console.print(f"[yellow]finished with failed phase(s): {', '.join(failed)} (see the report)[/yellow]")

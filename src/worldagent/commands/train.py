@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import algo_help, algorithm, env_argument, env_options, option_flag
+from worldagent.commands.options import algo_help, algorithm, env_argument, env_options, option_flag, set_flag
 from worldagent.errors import WorldagentError
 
 
@@ -26,12 +26,13 @@ def register(app: typer.Typer) -> None:
         ),
         generator: Path = typer.Option(None, "--generator", help="Generator directory for --worlds vae."),
         option: list[str] = option_flag(),
+        settings: list[str] = set_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the run."),
         resume: bool = typer.Option(True, "--resume/--restart", help="Continue from the run directory's checkpoint, or start over."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
     ) -> None:
         """Train agents on a distribution of worlds (paper §4.3, §5.3); a killed run resumes."""
-        from worldagent.agents.algorithms import training_config
+        from worldagent.agents.algorithms import parse_settings, training_config
         from worldagent.agents.distributions import world_distribution
         from worldagent.agents.training import train as run_training
         from worldagent.envs import registry
@@ -43,7 +44,7 @@ def register(app: typer.Typer) -> None:
             raise WorldagentError(f"--episodes {episodes}; train for at least one episode.")
         if worlds == "vae" and generator is None:
             raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
-        config = training_config(spec, algo, episodes=episodes, options=options)
+        config = training_config(spec, algo, episodes=episodes, options=options, **parse_settings(settings, [algo])[algo])
         distribution = world_distribution(spec, worlds, generator_dir=generator, progress=not quiet)
         result = run_training(
             spec, algo, config, distribution, out, seed=seed, options=options, progress=not quiet, resume=resume, distribution_spec=worlds

@@ -95,13 +95,14 @@ class EnvContext:
         return self.cached("setup", make)
 
     def train_config(self, episodes: int):
-        """The env's algorithm's config at ``episodes``, with the preset's parallel envs / warm-up."""
+        """The env's algorithm's config at ``episodes``, with the preset's parallel envs / warm-up and ``--set``'s fields."""
         from worldagent.agents.algorithms import training_config
 
         b = self.budgets
         overrides = {
             **({"num_envs": b.train_envs} if b.train_envs else {}),
             **({"learning_starts": b.learning_starts} if b.learning_starts is not None else {}),
+            **self.preset.settings_of(self.env),
         }
         return training_config(self.spec, self.algo, episodes=episodes, options=self.options, **overrides)
 

@@ -122,6 +122,9 @@ class Preset:
         vae_batch_size: VAE minibatch.
         algo: the training algorithm for every env whose ``spec.algorithms`` has it (``--algo``);
             None: each env's ``EnvBudgets.algo``, else its ``spec.default_algorithm``.
+        settings: ``{algo: {config field: value}}`` set on every agent trained with ``algo``
+            (``reproduce --set``, ``algorithms.parse_settings``), over the env's own settings and
+            the budgets' ``train_envs`` / ``learning_starts``.
     """
 
     name: str
@@ -132,6 +135,7 @@ class Preset:
     vae_hidden: tuple[int, ...] = (1024, 512)
     vae_batch_size: int = 128
     algo: str | None = None
+    settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.repeats < 1 or self.seed < 0:
@@ -157,6 +161,10 @@ class Preset:
             spec.check_options(budgets.options)  # an unknown option is refused with the known ones
             if budgets.algo and budgets.algo not in spec.algorithms:
                 raise WorldagentError(f"preset {self.name!r}: {env} trains with {', '.join(spec.algorithms)}, not {budgets.algo!r}.")
+            if self.settings_of(env):  # a bad value is refused now, not after the phases before training
+                from worldagent.agents.algorithms import training_config
+
+                training_config(env, self.algo_of(env), budgets.episodes, options=self.options_of(env), **self.settings_of(env))
 
     def budgets(self, env: str) -> EnvBudgets:
         """The budgets of ``env``."""
@@ -180,6 +188,15 @@ class Preset:
         """This preset with another training algorithm where an env has it (``--algo``)."""
         return self if algo is None else replace(self, algo=algo)
 
+    def with_settings(self, settings: Mapping[str, Mapping[str, Any]]) -> Preset:
+        """This preset with config fields set on every agent of an algorithm (``--set``; ``{algo: {field: value}}``)."""
+        settings = {algo: dict(fields) for algo, fields in settings.items() if fields}
+        return replace(self, settings=settings) if settings else self
+
+    def settings_of(self, env: str) -> dict[str, Any]:
+        """The config fields ``--set`` gives ``env``'s agents (those of its algorithm)."""
+        return dict(self.settings.get(self.algo_of(env), {}))
+
     def phase_config(self, env: str, phase: str) -> dict:
         """The settings phase ``phase`` of ``env`` depends on (compared when a run resumes)."""
         b = self.budgets(env)
@@ -193,6 +210,7 @@ class Preset:
                 "train_envs": b.train_envs,
                 "learning_starts": b.learning_starts,
                 **({"options": options} if options else {}),
+                **({"settings": self.settings_of(env)} if self.settings_of(env) else {}),  # absent without --set: earlier runs still match
             },
             "random": {"worlds": b.random_worlds, "repeats": self.repeats},
             "strategic": {"budget": b.strategic_budget, "repeats": self.repeats, "optimiser": "cmaes"},
@@ -213,6 +231,7 @@ class Preset:
                 **({"search": b.influence_search} if b.influence_search != "cmaes" else {}),  # runs made before the field still match
                 "repeats": self.repeats,
                 "algo": self.algo_of(env),
+                **({"settings": self.settings_of(env)} if self.settings_of(env) else {}),
             },
             "atlas": {
                 "budget": b.atlas_budget,

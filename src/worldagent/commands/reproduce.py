@@ -19,6 +19,7 @@ REPRODUCE_SET_HELP = (
 def register(app: typer.Typer) -> None:
     """Add ``reproduce`` and ``report`` to the CLI."""
     from worldagent.envs import registry
+    from worldagent.reproduce.presets import PHASES
 
     @app.command()
     @friendly_errors
@@ -34,7 +35,7 @@ def register(app: typer.Typer) -> None:
         restart: list[str] = typer.Option(
             [],
             "--restart",
-            help="Redo this phase (and what depends on it): dataset, generator, agent, random, strategic, compare, influence. Repeatable.",
+            help=f"Redo this phase (and what depends on it): {', '.join(PHASES)}. Repeatable.",
         ),
         settings: list[str] = set_flag(REPRODUCE_SET_HELP),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),

@@ -291,3 +291,61 @@ def test_declared_algorithms_pictures_and_presets(case):
         from worldagent.influence.selection import parse_selection
 
         parse_selection(case.spec.selection, case.spec.name)
+
+
+def test_actor_critic_algorithms_get_a_flat_observation(case):
+    """PPO and ACKTR's network reads a flat observation f32[D] (``agents.networks`` refuses others)."""
+    from worldagent.agents.networks import check_flat_observation
+
+    if {"ppo", "acktr"} & set(case.spec.algorithms):
+        check_flat_observation(case.env.observation_shape)
+
+
+DESCRIBED = 64  # generated worlds each descriptor is measured on
+
+
+def test_descriptors_vary_over_generated_worlds(case):
+    """``worldagent atlas`` refuses a descriptor constant over its 512 G(z) samples; one constant
+    over the procedural generator's worlds would be."""
+    worlds = case.spec.generate(np.arange(DESCRIBED))
+    for name, describe in case.spec.metrics.descriptors.items():
+        values = {float(describe(jax.tree_util.tree_map(lambda leaf, i=i: np.asarray(leaf)[i], worlds))) for i in range(DESCRIBED)}
+        assert len(values) > 1, f"descriptor {name!r} is the same on {DESCRIBED} generated worlds; the atlas would refuse it"
+
+
+def test_episode_pictures_draw_episodes(case, jitted, played):
+    """``pictures.episodes(axis, world, episodes)`` draws an ``evaluation.trajectories.Episodes``
+    (what ``play`` and the reports replay): here one episode traced at its start and its end, as
+    ``spec.trace`` says where the agents are; ``episode_note`` reads its metrics."""
+    from worldagent.evaluation.trajectories import Episodes
+    from worldagent.reports.figures import _pyplot
+
+    if case.spec.pictures.episodes is None:
+        pytest.skip(f"{case.spec.name} registers no episode picture")
+    _, start = jitted.reset(KEYS[0], case.world(0), case.params)
+    final = jax.tree_util.tree_map(lambda leaf: leaf[0], played["final"])
+    (first, first_present), (last, last_present) = case.spec.trace(start), case.spec.trace(final)
+    metrics = {name: np.asarray(value)[None] for name, value in case.env.metrics(final).items()}
+    episodes = Episodes(
+        positions=np.stack([first, last])[None], present=np.stack([first_present, last_present])[None], steps=np.array([1]), metrics=metrics
+    )
+    plt = _pyplot()
+    figure, axis = plt.subplots()
+    try:
+        case.spec.pictures.episodes(axis, case.world(0), episodes)
+    finally:
+        plt.close(figure)
+    if case.spec.episode_note:
+        assert isinstance(case.spec.episode_note(episodes.metrics), str)
+
+
+def test_failure_and_training_check_are_usable(case, jitted, played):
+    """``failure`` parses as a selection; ``training_check`` reads mean metrics and returns text."""
+    from worldagent.influence.selection import parse_selection
+
+    if case.spec.failure:
+        parse_selection(case.spec.failure, case.spec.name)
+    if case.spec.training_check is not None:
+        final = case.spec.metrics.with_derived(jax.tree_util.tree_map(np.asarray, jax.vmap(case.env.metrics)(played["final"])), case.params)
+        means = {name: float(np.mean(value)) for name, value in final.items()}
+        assert isinstance(case.spec.training_check(means), str)

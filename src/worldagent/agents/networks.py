@@ -59,6 +59,15 @@ def quadratic_features(x: jax.Array) -> jax.Array:
     return jnp.concatenate([x, x[..., i] * x[..., j]], axis=-1)
 
 
+def check_flat_observation(shape: Sequence[int]) -> None:
+    """PPO and ACKTR's actor-critic reads a flat observation f32[D]; refuse any other shape in one line."""
+    if len(shape) != 1:
+        raise WorldagentError(
+            f"PPO and ACKTR need a flat observation (observation_shape (D,)); this env's is {tuple(shape)}: "
+            "flatten it in the env's observe, or train with an algorithm that reads any shape (dqn)."
+        )
+
+
 class ActorCritic(nn.Module):
     """Categorical policy logits and a state value from a flat observation.
 
@@ -77,7 +86,13 @@ class ActorCritic(nn.Module):
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """obs [..., D] (any dtype; cast to f32) -> (logits f32[..., A], value f32[...])."""
+        """obs [..., D] (any dtype; cast to f32) -> (logits f32[..., A], value f32[...]).
+
+        Initialise with one observation f32[D] (as PPO and ACKTR do): an observation of another
+        shape is refused there, in one line, instead of failing later inside a trainer.
+        """
+        if self.is_initializing():
+            check_flat_observation(obs.shape)
         x = obs.astype(jnp.float32)
         x = quadratic_features(x) if self.quadratic else x
         logits = MLP(tuple(self.hidden), self.num_actions, 0.01, self.activation, name="actor")(x)

@@ -1,4 +1,4 @@
-"""``worldagent envs``: the registered environments, their options, metrics, algorithms and policies."""
+"""``worldagent envs``: the registered environments, their options, metrics, descriptors, algorithms, policies and presets."""
 
 from __future__ import annotations
 
@@ -21,14 +21,35 @@ def describe(name: str) -> str:
         f"  options:     {options}",
         f"  metrics:     {', '.join(metrics.names)} (main: {metrics.main}, also called reward)",
         *([f"  aliases:     {aliases}"] if aliases else []),
+        f"  descriptors: {descriptor_line(metrics)}",
+        *(
+            [f"  failure:     {spec.failure} (what reproduce counts as a failure; e.g. atlas --failure, failure-rate --event)"]
+            if spec.failure
+            else []
+        ),
         f"  algorithms:  {algorithms}",
         f"  policies:    {', '.join(spec.scripted) or 'none'} (scripted, for --agent)",
+        f"  presets:     {preset_line(spec.presets)}",
     ]
     return "\n".join(lines)
 
 
+def descriptor_line(metrics) -> str:
+    """``total_curvature (default), ..., track_length (for atlas --descriptors)``."""
+    named = [f"{name} (default)" if name in metrics.default_descriptors else name for name in metrics.descriptors]
+    return f"{', '.join(named)} (for atlas --descriptors)" if named else "none (no failure atlas)"
+
+
+def preset_line(presets) -> str:
+    """``paper (10,000 worlds, 10,000 episodes), tiny (...) (for reproduce --preset)``: each preset's dataset and training budget."""
+    if not presets:
+        return "none (no reproduce run)"
+    sizes = lambda budgets: ", ".join(f"{budgets[key]:,} {key}" for key in ("worlds", "episodes") if key in budgets)  # noqa: E731
+    return ", ".join(f"{name} ({sizes(budgets)})" if sizes(budgets) else name for name, budgets in presets.items()) + " (for reproduce --preset)"
+
+
 def envs_command() -> None:
-    """List the registered environments with their options, metrics, algorithms and scripted policies."""
+    """List the registered environments with their options, metrics, descriptors, algorithms, scripted policies and presets."""
     from worldagent.envs import registry
 
     typer.echo("\n\n".join(describe(name) for name in registry.names()))

@@ -70,9 +70,16 @@ def overview(manifest: dict, run_dir: Path) -> str:
         + table(["phase", "status", "wall s", "started", "finished", "config", "result"], phases)
         + f"<p>Total wall time of the phases: {total:,.1f} s.</p>"
         + "<h3>Preset</h3><pre>"
-        + esc(json.dumps(manifest.get("config", {}), indent=1))
+        + esc(json.dumps(preset_of_run(manifest.get("config", {}), manifest.get("envs", [])), indent=1))
         + "</pre>"
     )
+
+
+def preset_of_run(config: dict, envs: list[str]) -> dict:
+    """The recorded preset with the budgets of only the environments the run ran (a preset holds every env's)."""
+    if not isinstance(config.get("envs"), dict):
+        return config
+    return {**config, "envs": {name: budgets for name, budgets in config["envs"].items() if name in envs}}
 
 
 def _time(stamp: float | None) -> str:

@@ -1,0 +1,181 @@
+"""Bad input to the commands fails with one line naming the fix, before anything heavy loads (issue 30, item 7).
+
+Every case passes a generator directory that does not exist: a check that ran only after the
+agent and generator loaded would answer "holds no generator" instead of the expected line.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from worldagent.cli import app
+from worldagent.files import can_create_files_in
+
+runner = CliRunner()
+
+HEAVY = ["--agent", "driver", "--generator", "no-generator-here"]  # never loaded when a check fails first
+
+
+def one_line(result) -> str:
+    """The single ``error:`` line of a refused command (exit code 2), or a failure showing what came instead."""
+    lines = result.output.strip().splitlines()
+    assert result.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error:"), result.output
+    return lines[0]
+
+
+@pytest.fixture
+def paths(tmp_path):
+    """``file``: an existing file; ``dir``: an existing folder; ``new``: a folder not made yet."""
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "dir").mkdir()
+    return {name: str(tmp_path / name) for name in ("file", "dir", "new")}
+
+
+def cases(p: dict) -> list[tuple[list[str], str]]:
+    """(arguments, a piece of the one line they must get)."""
+    under_file = f"{p['file']}/out"
+    return [
+        # unwritable outputs
+        (["worlds", "racing", "--out", f"{under_file}.png"], "is a file, not a folder"),
+        (["worlds", "racing", "--out", p["dir"]], "is a folder; pass a file name"),
+        (["play", "racing", "--policy", "driver", "--out", f"{under_file}.png"], "is a file, not a folder"),
+        (["dataset", "racing", "--n", "4", "--out", f"{under_file}.npz"], "is a file, not a folder"),
+        (["dataset", "racing", "--n", "4", "--out", p["dir"]], "is a folder; pass a file name"),
+        (["atlas", "racing", *HEAVY, "--out", p["file"]], "is a file; pass a folder"),
+        (["atlas", "racing", *HEAVY, "--out", under_file], "is a file, not a folder"),
+        (["search", "racing", *HEAVY, "--out", p["file"]], "is a file; pass a folder"),
+        (["evaluate", "random", "racing", *HEAVY, "--out", under_file], "is a file, not a folder"),
+        (["strategic", "racing", *HEAVY, "--out", p["file"]], "is a file; pass a folder"),
+        (["compare", "racing", *HEAVY, "--out", p["file"]], "is a file; pass a folder"),
+        (["generator", "train", "racing", "--out", p["file"]], "is a file; pass a folder"),
+        (["generator", "show", "no-generator-here", "--out", p["file"]], "is a file; pass a folder"),
+        # seeds
+        (["worlds", "racing", "--seed", "-1", "--out", f"{p['dir']}/w.png"], "--seed is -1; seeds are integers from 0"),
+        (["play", "racing", "--policy", "driver", "--seed", "-1", "--out", f"{p['dir']}/e.png"], "--seed is -1"),
+        (["dataset", "racing", "--seed", "99999999999999999999", "--out", f"{p['dir']}/d.npz"], "seeds are integers from 0 to 2,147,483,647"),
+        (["atlas", "racing", *HEAVY, "--seed", "-1", "--out", p["new"]], "--seed is -1"),
+        (["search", "racing", *HEAVY, "--seed", "-1", "--out", p["new"]], "--seed is -1"),
+        (["evaluate", "random", "racing", *HEAVY, "--seed", "-1", "--out", p["new"]], "--seed is -1"),
+        (["strategic", "racing", *HEAVY, "--seed", "-1", "--out", p["new"]], "--seed is -1"),
+        (["compare", "racing", *HEAVY, "--random-seed", "-5", "--out", p["new"]], "--random-seed is -5"),
+        (["generator", "train", "racing", "--seed", "-1", "--out", p["new"]], "--seed is -1"),
+        (["generator", "report", "no-generator-here", "--seed", "-1"], "--seed is -1"),
+        # sizes
+        (["worlds", "racing", "--n", "200000", "--out", f"{p['dir']}/w.png"], "--n is 200,000, above the cap of 256"),
+        (["play", "racing", "--policy", "driver", "--episodes", "100000", "--out", f"{p['dir']}/e.png"], "above the cap of 256"),
+        (["dataset", "racing", "--n", "1000000000", "--out", f"{p['dir']}/d.npz"], "above the cap of 1,000,000"),
+        (["generator", "train", "racing", "--n", "1000000000", "--out", p["new"]], "above the cap of 1,000,000"),
+        (["generator", "show", "no-generator-here", "--count", "100000"], "--count is 100,000, above the cap"),
+        (["generator", "report", "no-generator-here", "--samples", "0"], "--samples is 0; it must be at least 1"),
+        (["evaluate", "random", "racing", *HEAVY, "--repeats", "100000000", "--out", p["new"]], "--repeats is 100,000,000, above the cap of 1,000"),
+        (["search", "racing", *HEAVY, "--budget", "0", "--out", p["new"]], "--budget is 0"),
+        (["strategic", "racing", *HEAVY, "--random-worlds", "100000000", "--out", p["new"]], "--random-worlds is 100,000,000, above the cap"),
+        (["compare", "racing", *HEAVY, "--seeds", "5000", "--out", p["new"]], "--seeds is 5,000, above the cap of 1,000"),
+        # options, descriptors and failure events, checked before the agent and generator load
+        (["atlas", "racing", *HEAVY, "--budget", "0", "--out", p["new"]], "--budget is 0"),
+        (["atlas", "racing", *HEAVY, "--descriptors", "wingspan", "--out", p["new"]], "unknown descriptor 'wingspan' for racing"),
+        (["atlas", "racing", *HEAVY, "--cells", "1", "--out", p["new"]], "--cells 1"),
+        (["atlas", "racing", *HEAVY, "--failure", "bogus", "--out", p["new"]], "expected an operator"),
+        (["atlas", "racing", *HEAVY, "--failure", "wingspan > 2", "--out", p["new"]], "wingspan"),
+        (["atlas", "racing", *HEAVY, "--objective", "speed", "--out", p["new"]], "racing has no metric 'speed'"),
+        (["search", "racing", *HEAVY, "--optimiser", "annealing", "--out", p["new"]], "unknown optimiser 'annealing'"),
+        (["search", "racing", *HEAVY, "--objective", "speed", "--out", p["new"]], "racing has no metric 'speed'"),
+        (["evaluate", "random", "racing", *HEAVY, "--metric", "speed", "--out", p["new"]], "racing has no metric 'speed'"),
+        (["strategic", "racing", *HEAVY, "--optimiser", "annealing", "--out", p["new"]], "unknown optimiser 'annealing'"),
+        (["compare", "racing", *HEAVY, "--metric", "speed", "--out", p["new"]], "racing has no metric 'speed'"),
+    ]
+
+
+def test_bad_input_gets_one_line_before_anything_loads(paths):
+    for args, message in cases(paths):
+        line = one_line(runner.invoke(app, args))
+        assert message in line, (args, line)
+    assert not Path(paths["new"]).exists() and not any(Path(paths["dir"]).iterdir()), "a refused command wrote something"
+
+
+def damaged_store(folder):
+    """A run store in ``folder`` whose evaluations table's root page is overwritten with junk."""
+    from worldagent.store import RunStore
+
+    with RunStore(folder):
+        pass
+    path = folder / "store.sqlite"
+    db = sqlite3.connect(path)
+    page_size = db.execute("PRAGMA page_size").fetchone()[0]
+    root = db.execute("SELECT rootpage FROM sqlite_master WHERE name = 'evaluations'").fetchone()[0]
+    db.close()
+    with open(path, "r+b") as handle:
+        handle.seek((root - 1) * page_size)
+        handle.write(b"\x07" * page_size)
+    return folder
+
+
+def test_a_damaged_store_is_refused_before_anything_loads(tmp_path):
+    run = damaged_store(tmp_path / "run")
+    for command in (["search", "racing"], ["atlas", "racing"], ["evaluate", "random", "racing"]):
+        line = one_line(runner.invoke(app, [*command, *HEAVY, "--out", str(run)]))
+        assert "store.sqlite is damaged" in line and "restore it from a copy" in line
+
+
+@pytest.fixture
+def read_only(tmp_path):
+    """A folder this process cannot create files in (skipped where permissions do not bind, e.g. as root)."""
+    folder = tmp_path / "read-only"
+    folder.mkdir()
+    folder.chmod(0o555)
+    if can_create_files_in(folder):
+        folder.chmod(0o755)
+        pytest.skip("permissions do not stop this user (root?)")
+    yield folder
+    folder.chmod(0o755)
+
+
+def test_read_only_outputs_and_stores(read_only):
+    from worldagent.errors import WorldagentError
+    from worldagent.store import RunStore
+
+    line = one_line(runner.invoke(app, ["worlds", "racing", "--out", str(read_only / "w.png")]))
+    assert f"cannot create files in {read_only}" in line
+    line = one_line(runner.invoke(app, ["search", "racing", *HEAVY, "--out", str(read_only / "run")]))
+    assert "cannot create files in" in line
+    # a valid store in a read-only folder is named as such, not "not a worldagent run store"
+    read_only.chmod(0o755)
+    with RunStore(read_only):
+        pass
+    read_only.chmod(0o555)
+    with pytest.raises(WorldagentError, match="SQLite must write in"):
+        RunStore(read_only, create=False)
+
+
+def test_repair_settings_are_refused_before_the_vae_trains(tmp_path):
+    out = tmp_path / "gen"
+    line = one_line(runner.invoke(app, ["generator", "train", "racing", "--out", str(out), "--n", "8", "--repair", "apples=40", "--quiet"]))
+    assert "nearest-world repair of racing has no settings (given: apples); drop --repair" in line
+    assert (out / "dataset.npz").exists() and sorted(p.name for p in out.iterdir()) == ["dataset.npz"]  # no VAE checkpoint
+
+
+def test_envs_lists_descriptors_failure_and_presets():
+    result = runner.invoke(app, ["envs"])
+    assert result.exit_code == 0, result.output
+    text = result.output
+    assert "descriptors: total_curvature (default), sharpest_corner (default), track_length (for atlas --descriptors)" in text
+    assert "wall_share (default)" in text and "apple_clustering (default)" in text and "largest_patch" in text
+    assert "failure:     crash_rate > 0.5" in text
+    assert "presets:     paper (10,000 worlds, 10,000 episodes)" in text and "tiny (256 worlds, 4 episodes)" in text
+
+
+def help_text(*command: str) -> str:
+    """``--help`` of a command as one line of words (rich's box and wrapping removed)."""
+    return " ".join(runner.invoke(app, [*command, "--help"]).output.replace("│", " ").split())
+
+
+def test_help_texts_name_every_phase_and_where_descriptors_are_listed():
+    from worldagent.reproduce.presets import PHASES
+
+    assert "atlas" in PHASES
+    assert f"Redo this phase (and what depends on it): {', '.join(PHASES)}." in help_text("reproduce")
+    assert "`worldagent envs` lists" in help_text("atlas")

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import subprocess
+import sys
 import warnings
 
 import jax
 import jax.numpy as jnp
 import pytest
-import typer
 from flax import struct
 from typer.testing import CliRunner
 
@@ -21,7 +22,7 @@ from worldagent.agents.distributions import world_distribution
 from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.ppo import PPOConfig, make_train
 from worldagent.cli import app
-from worldagent.commands.console import friendly_errors
+from worldagent.commands.console import friendly_errors, one_line_warning
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
@@ -165,17 +166,23 @@ def test_reproduce_set_reaches_the_agents_of_its_algorithm():
     assert one_line_error(runner.invoke(app, ["reproduce", "--preset", "tiny", "--set", "num_envs=0", "--show"]), "num_envs=0")
 
 
+WARNING_APP = """
+import warnings, typer
+from worldagent.commands.console import friendly_errors, one_line_warning
+
+@friendly_errors
+def warn() -> None:
+    warnings.warn("the default agent\\n   laps in only 10% of its episodes", stacklevel=2)
+    warnings.warn("overflow", RuntimeWarning, stacklevel=2)
+
+typer.run(warn)
+"""
+
+
 def test_commands_show_warnings_as_one_line():
-    small = typer.Typer()
-
-    @small.command()
-    @friendly_errors
-    def warn() -> None:
-        warnings.warn("the default agent\n   laps in only 10% of its episodes", stacklevel=2)
-        warnings.warn("overflow", RuntimeWarning, stacklevel=2)
-
-    result = runner.invoke(small, [])
-    assert result.exit_code == 0, result.output
-    lines = result.output.strip().splitlines()
-    assert lines == ["warning: the default agent laps in only 10% of its episodes", "warning (RuntimeWarning): overflow"]
-    assert all(".py" not in line for line in lines)
+    shown = subprocess.run([sys.executable, "-c", WARNING_APP], capture_output=True, text=True, timeout=120)
+    assert shown.returncode == 0, shown.stderr
+    assert shown.stderr.splitlines() == ["warning: the default agent laps in only 10% of its episodes", "warning (RuntimeWarning): overflow"]
+    with pytest.warns(UserWarning, match="laps in only"):  # recording still works through a command
+        friendly_errors(lambda: warnings.warn("laps in only 0%", stacklevel=2))()
+    assert warnings.formatwarning is not one_line_warning  # restored after the command

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import warnings
 
@@ -14,11 +15,22 @@ from worldagent.errors import WorldagentError
 console = Console(stderr=True, soft_wrap=True)  # never break a message across lines
 
 
-def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """``warnings.showwarning`` for the command line: the message on one line, without the file
+def one_line_warning(message, category, filename, lineno, line=None) -> str:
+    """``warnings.formatwarning`` for the command line: the message on one line, without the file
     path and source line Python adds (library users keep Python's own format)."""
     kind = "" if category is UserWarning else f" ({category.__name__})"
-    console.print(f"[yellow]warning{kind}:[/yellow] {escape(' '.join(str(message).split()))}", soft_wrap=True)
+    return f"warning{kind}: {' '.join(str(message).split())}\n"
+
+
+@contextlib.contextmanager
+def one_line_warnings():
+    """Warnings shown while the block runs are one line each. Only their format changes (not
+    ``showwarning``), so whoever records warnings (``pytest.warns``) still sees them."""
+    previous, warnings.formatwarning = warnings.formatwarning, one_line_warning
+    try:
+        yield
+    finally:
+        warnings.formatwarning = previous
 
 
 def friendly_errors(command):
@@ -27,8 +39,7 @@ def friendly_errors(command):
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
-        with warnings.catch_warnings():  # restores Python's showwarning afterwards
-            warnings.showwarning = one_line_warning
+        with one_line_warnings():
             try:
                 return command(*args, **kwargs)
             except WorldagentError as error:

@@ -156,6 +156,10 @@ def test_repair_settings_are_refused_before_the_vae_trains(tmp_path):
     line = one_line(runner.invoke(app, ["generator", "train", "racing", "--out", str(out), "--n", "8", "--repair", "apples=40", "--quiet"]))
     assert "nearest-world repair of racing has no settings (given: apples); drop --repair" in line
     assert (out / "dataset.npz").exists() and sorted(p.name for p in out.iterdir()) == ["dataset.npz"]  # no VAE checkpoint
+    out = tmp_path / "harvest"
+    line = one_line(runner.invoke(app, ["generator", "train", "harvest", "--out", str(out), "--n", "8", "--repair", "apples=many", "--quiet"]))
+    assert "harvest's repair refuses its settings (apples='many')" in line and "fix or drop --repair" in line
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.npz"]
 
 
 def test_envs_lists_descriptors_failure_and_presets():

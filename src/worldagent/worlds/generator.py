@@ -94,12 +94,15 @@ def make_repair(dataset: WorldDataset, repair_config: Mapping[str, Any] | None =
     before the VAE trains, so bad settings cost no training.
 
     A repair refuses unknown names and bad values with a ``WorldagentError``; one that raises
-    ``TypeError``, ``ValueError`` or ``KeyError`` instead is reported in one line too.
+    ``TypeError``, ``ValueError`` or ``KeyError`` instead, when made or when traced on one
+    abstract batch of logits (a value of the wrong type fails there), is reported in one line too.
     """
     spec = registry.get(dataset.env)
     settings = dict(repair_config or {})
     try:
-        return spec.repair(dataset, settings)
+        repair = spec.repair(dataset, settings)
+        jax.eval_shape(repair, jax.ShapeDtypeStruct((1, spec.cell_count), jnp.float32))  # shapes only: nothing is computed
+        return repair
     except WorldagentError:
         raise
     except (TypeError, ValueError, KeyError) as error:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 import subprocess
 import sys
 import warnings
 
-import jax
 import jax.numpy as jnp
 import pytest
 from flax import struct
@@ -18,9 +18,8 @@ from toy_env import registered
 from toy_env.env import ToyGrid, ToyParams
 from worldagent.agents.acktr import ACKTRConfig
 from worldagent.agents.algorithms import parse_settings, training_config
-from worldagent.agents.distributions import world_distribution
 from worldagent.agents.dqn import DQNConfig
-from worldagent.agents.ppo import PPOConfig, make_train
+from worldagent.agents.ppo import PPOConfig
 from worldagent.cli import app
 from worldagent.commands.console import friendly_errors, one_line_warning
 from worldagent.envs import registry
@@ -89,20 +88,39 @@ class ReportingGrid(ToyGrid):
         return obs, state, reward, terminated, truncated, {**info, "respawn": params.respawn, "crash_penalty": params.crash_penalty}
 
 
-def test_a_toy_env_with_racing_like_fields_is_trained_as_it_is_unless_its_spec_says_otherwise():
-    env = ReportingGrid()
-    with registered():
-        pool = world_distribution("toy", "generator", size=4, seed=0)
-    config = PPOConfig(total_episodes=4, num_envs=2, num_steps=32, num_minibatches=1, update_epochs=1, hidden=(4,), respawn=True, crash_warmup=0.5)
+def make_fielded(options):
+    """The reporting grid and its params with racing-like names."""
+    del options
+    return ReportingGrid(), FieldedParams()
 
-    def first_update(training_params=None):
-        trainer = make_train(config, env, FieldedParams(), pool, training_params)
-        return jax.device_get(trainer.train_chunk(trainer.init(jax.random.key(0)), 1)[1])
 
-    untouched = first_update()
-    assert untouched["respawn"][0] == 0.0 and untouched["crash_penalty"][0] == 1.0  # respawn=True and the warm-up change nothing
-    declared = first_update(lambda params, cfg, fraction: params.replace(respawn=cfg.respawn, crash_penalty=params.crash_penalty * fraction))
-    assert declared["respawn"][0] == 1.0 and declared["crash_penalty"][0] == 0.0  # a spec's training_params is what changes them
+def train_fielded(tmp_path, training_params=None) -> tuple[dict, dict]:
+    """``worldagent train`` on the toy with racing-like param names, asked for respawn and a warm-up:
+    (the config run.json records, the curve's first row)."""
+    with registered() as toy:
+        spec = registry.register(dataclasses.replace(toy, name="fielded_toy", make=make_fielded, training_params=training_params))
+        try:
+            args = ["train", "fielded_toy", "--out", str(tmp_path), "--episodes", "4", "--quiet", "--set", "respawn=true"]
+            result = runner.invoke(app, [*args, "--set", "crash_warmup=0.5", "--set", "num_envs=2", "--set", "hidden=8"])
+        finally:
+            registry.unregister(spec.name)
+    assert result.exit_code == 0, result.output
+    with open(tmp_path / "curve.csv", newline="") as handle:
+        return json.loads((tmp_path / "run.json").read_text())["config"], next(csv.DictReader(handle))
+
+
+def test_set_applies_is_recorded_and_a_toy_with_racing_like_fields_is_not_rewritten(tmp_path):
+    config, first = train_fielded(tmp_path)
+    assert (config["respawn"], config["crash_warmup"], config["num_envs"], config["hidden"], config["total_episodes"]) == (True, 0.5, 2, [8], 4)
+    assert config["num_steps"] == 32 and config["reward_scale"] == 1.0  # the toy's departures and PPO's default where --set is silent
+    assert float(first["respawn"]) == 0.0 and float(first["crash_penalty"]) == 1.0  # respawn and the warm-up change nothing
+
+
+def test_a_spec_s_training_params_is_what_the_trainer_applies(tmp_path):
+    _, first = train_fielded(
+        tmp_path, lambda params, config, fraction: params.replace(respawn=config.respawn, crash_penalty=params.crash_penalty * fraction)
+    )
+    assert float(first["respawn"]) == 1.0 and float(first["crash_penalty"]) == 0.0
 
 
 def test_parse_settings_types_and_one_line_refusals():
@@ -131,30 +149,6 @@ def test_train_set_refuses_bad_settings_in_one_line(tmp_path):
     missing = runner.invoke(app, ["influence", "racing", "--agent", "driver", "--generator", out, "--select", "crash_rate > 0", "--set", "gamma=x"])
     assert one_line_error(missing, "gamma takes a number")  # before the missing generator is looked at
     assert not (tmp_path / "run").exists()
-
-
-def test_train_set_applies_and_is_recorded(tmp_path):
-    with registered():
-        args = [
-            "train",
-            "toy",
-            "--out",
-            str(tmp_path),
-            "--episodes",
-            "4",
-            "--quiet",
-            "--set",
-            "num_envs=2",
-            "--set",
-            "hidden=8",
-            "--set",
-            "gamma=0.9",
-        ]
-        result = runner.invoke(app, args)
-    assert result.exit_code == 0, result.output
-    config = json.loads((tmp_path / "run.json").read_text())["config"]
-    assert (config["num_envs"], config["hidden"], config["gamma"], config["reward_scale"], config["total_episodes"]) == (2, [8], 0.9, 1.0, 4)
-    assert config["num_steps"] == 32  # the toy's declared departure stays where --set does not touch it
 
 
 def test_reproduce_set_reaches_the_agents_of_its_algorithm():

@@ -53,7 +53,7 @@ SET_HELP = (
 
 def set_flag(help: str = SET_HELP):
     """The repeatable ``--set NAME=VALUE`` (a field of the training algorithm's config)."""
-    return typer.Option([], "--set", help=help)
+    return typer.Option([], "--set", metavar="NAME=VALUE", help=help)
 
 
 def stochastic_flag():

@@ -6,6 +6,8 @@ need the ``sb3`` extra (torch) and are skipped without it; training is also mark
 
 from __future__ import annotations
 
+import sys
+
 import gymnasium
 import numpy as np
 import pytest
@@ -59,6 +61,13 @@ def test_the_vector_envs_episode_ends_translate_to_sb3s(cache):
         np.testing.assert_array_equal(one["terminal_observation"], info["final_obs"][index])
         assert not np.array_equal(one["terminal_observation"], obs[index])  # obs is already the next episode's
         assert one["TimeLimit.truncated"] == bool(truncated[index] and not terminated[index])
+
+
+def test_without_sb3_the_adapter_names_the_extra(cache, monkeypatch):
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)  # as if not installed
+    monkeypatch.delitem(sys.modules, "worldagent.envs.sb3", raising=False)
+    with pytest.raises(WorldagentError, match=r"to_sb3 needs Stable-Baselines3 \(stable_baselines3 is missing\): pip install 'worldagent\[sb3\]'"):
+        to_sb3(make_envs(cache))
 
 
 def test_sb3_accepts_the_adapted_vector_env(cache):

@@ -462,5 +462,6 @@ def to_sb3(venv: gymnasium.vector.VectorEnv):
     except ImportError as error:
         if error.name is None or not error.name.startswith(("stable_baselines3", "torch")):
             raise
-        raise WorldagentError(f"to_sb3 needs Stable-Baselines3 ({error.name} is missing): pip install 'worldagent[sb3]'.") from None
+        missing = error.name.partition(".")[0]
+        raise WorldagentError(f"to_sb3 needs Stable-Baselines3 ({missing} is missing): pip install 'worldagent[sb3]'.") from None
     return monitored(venv)

@@ -13,10 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from worldagent.envs.registry import EnvSpec, Metrics, Pictures, ScriptedPolicy
+from worldagent.envs.repairs import NearestWorld
 
 from . import pictures
 from .env import LavaGridEnv
-from .repair import LavaRepair, raw_decode
+from .repair import raw_decode
 from .world import SIZE, START, LavaGrid, cells, generate
 
 NAME = "lavagrid"
@@ -81,7 +82,7 @@ SPEC = EnvSpec(
     generate=generate,
     cells=cells,
     cell_shape=(2, SIZE, SIZE),
-    repair=LavaRepair.from_dataset,
+    repair=NearestWorld.from_dataset,  # the dataset world nearest to the decoded cells (repair.py says why)
     metrics=Metrics(
         main="return",
         names=("return", "reached", "burned", "steps"),

@@ -1,9 +1,9 @@
 """A lava grid: lava cells and one goal on an 11×11 grid, the agent starting top-left.
 
 ``LavaGrid`` holds one world or a batch (leading axis on both fields). Every world has a
-lava-free path from the start to the goal: the generator and the repair both clear one
-(``clear_path``: an L-shaped path, down then across or across then down) and keep the cells next
-to the start free, so an agent always can reach the goal and is never born beside lava.
+lava-free path from the start to the goal: the generator clears one (``clear_path``: an
+L-shaped path, down then across or across then down) and keeps the cells next to the start
+free, so an agent always can reach the goal and is never born beside lava.
 """
 
 from __future__ import annotations

@@ -56,7 +56,11 @@ def register(app: typer.Typer) -> None:
             None, "--descriptors", help="1-3 comma-separated world descriptors (default: the env's; `worldagent envs` lists each env's)."
         ),
         cells: int = typer.Option(10, "--cells", help="Cells per descriptor."),
-        failure: str = typer.Option(None, "--failure", help='Which worlds fail, e.g. "crash_rate > 0.5", to count distinct failing worlds.'),
+        failure: str = typer.Option(
+            None,
+            "--failure",
+            help='Which worlds fail, e.g. "crash_rate > 0.5" (`worldagent envs` prints each env\'s), to count distinct failing worlds.',
+        ),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         seed: int = typer.Option(0, "--seed", help="Seed of the emitters, the grid and every episode."),
         out: Path = typer.Option(Path("runs/atlas"), "--out", help="Run directory (store.sqlite and atlas PNG); a rerun resumes."),

@@ -18,7 +18,7 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def dataset(
         env: str = env_argument(),
-        n: int = typer.Option(10_000, "--n", help="Number of worlds (the paper: 10,000)."),
+        n: int = typer.Option(10_000, "--n", help=f"Number of worlds (the paper: 10,000; at most {DATASET_CAP:,})."),
         seed: int = typer.Option(0, "--seed", help="World i uses generator seed SEED + i."),
         out: Path = typer.Option(..., "--out", help="Dataset file to write (.npz)."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),

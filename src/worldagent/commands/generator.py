@@ -89,7 +89,7 @@ def register(app: typer.Typer) -> None:
         env: str = env_argument(),
         out: Path = typer.Option(..., "--out", help="Generator directory (resumed if it holds an unfinished run)."),
         dataset_path: Path = typer.Option(None, "--dataset", help="Dataset file; default: OUT/dataset.npz, made if missing."),
-        n: int = typer.Option(10_000, "--n", help="Worlds in a dataset made here."),
+        n: int = typer.Option(10_000, "--n", help=f"Worlds in a dataset made here (at most {DATASET_CAP:,})."),
         seed: int = typer.Option(0, "--seed", help="First generator seed of a dataset made here."),
         epochs: int = typer.Option(None, "--epochs", help="Training epochs (default: the env's paper preset, e.g. racing 25, harvest 100)."),
         beta: float = typer.Option(1.0, "--beta", help="Weight of the KL term of the ELBO."),
@@ -122,7 +122,7 @@ def register(app: typer.Typer) -> None:
     def generator_show(
         directory: Path = typer.Argument(..., help="Generator directory (from `generator train`)."),
         out: Path = typer.Option(None, "--out", help="Folder for traversals.png and reconstructions.png (default: the generator directory)."),
-        count: int = typer.Option(8, "--count", help="Held-out worlds to reconstruct."),
+        count: int = typer.Option(8, "--count", help=f"Held-out worlds to reconstruct (at most {PICTURE_CAP})."),
     ) -> None:
         """Draw latent traversals of G(z) and reconstructions of held-out worlds next to their originals."""
         import numpy as np

@@ -75,7 +75,7 @@ def register(app: typer.Typer) -> None:
         env: str = env_argument(),
         policy: str = typer.Option(..., "--policy", help=AGENT_HELP),
         seed: int = typer.Option(0, "--seed", help="Generator seed of the world to play."),
-        episodes: int = typer.Option(1, "--episodes", help="Episodes to play and draw."),
+        episodes: int = typer.Option(1, "--episodes", help=f"Episodes to play and draw (at most {PICTURE_CAP})."),
         key: int = typer.Option(0, "--key", help="Seed of the episodes' randomness."),
         out: Path = typer.Option(Path("episodes.png"), "--out", help="PNG file to write."),
         option: list[str] = option_flag(),

@@ -36,7 +36,7 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def worlds(
         env: str = env_argument(),
-        n: int = typer.Option(16, "--n", help="Number of worlds to draw."),
+        n: int = typer.Option(16, "--n", help=f"Number of worlds to draw (at most {PICTURE_CAP})."),
         seed: int = typer.Option(0, "--seed", help="World i uses generator seed SEED + i."),
         out: Path = typer.Option(Path("worlds.png"), "--out", help="PNG file to write."),
     ) -> None:

@@ -92,7 +92,14 @@ def given_options(env: str, texts: list[str]) -> dict:
 # The most of each count a command accepts: far above any real use (the paper: 8 episodes per
 # world, 10,000 worlds, budgets of a few thousand), low enough that a stray digit fails at once
 # instead of running for days or exhausting memory.
-COUNT_CAPS = {"repeats": 1_000, "worlds": 10_000_000, "budget": 10_000_000, "random_worlds": 10_000_000, "seeds": 1_000, "samples": 1_000_000}
+COUNT_CAPS = {
+    "repeats": 1_000,
+    "worlds": 10_000_000,
+    "budget": 10_000_000,
+    "random_worlds": 10_000_000,
+    "seeds": 1_000,
+    "samples": 1_000_000,
+}
 DATASET_CAP = 1_000_000  # worlds in a dataset (100x the paper's; racing's take about 12 GB)
 PICTURE_CAP = 256  # worlds or episodes drawn on one picture (a 16 x 16 sheet)
 MAX_SEED = 2**31 - 1  # seeds reach jax.random.key, which keeps 32 bits, and worlds SEED + i must too

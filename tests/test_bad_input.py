@@ -142,6 +142,14 @@ def test_read_only_outputs_and_stores(read_only):
     assert f"cannot create files in {read_only}" in line
     line = one_line(runner.invoke(app, ["search", "racing", *HEAVY, "--out", str(read_only / "run")]))
     assert "cannot create files in" in line
+    locked = read_only.parent / "locked"
+    (locked / "inner").mkdir(parents=True)
+    locked.chmod(0o000)  # not even readable: nothing inside it can be looked at
+    try:
+        line = one_line(runner.invoke(app, ["dataset", "racing", "--out", str(locked / "inner" / "d.npz")]))
+        assert f"cannot create files in {locked}" in line
+    finally:
+        locked.chmod(0o755)
     # a valid store in a read-only folder is named as such, not "not a worldagent run store"
     read_only.chmod(0o755)
     with RunStore(read_only):

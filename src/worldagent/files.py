@@ -22,16 +22,24 @@ def check_writable(path: Path | str, *, folder: bool, option: str = "--out") -> 
     which no file can be created (permissions, a read-only file system). Creates nothing.
     """
     path = Path(path)
-    if path.exists() and path.is_dir() != folder:
+    if visible(path) and path.is_dir() != folder:
         found, wanted = ("a file", "a folder") if folder else ("a folder", "a file name")
         raise WorldagentError(f"{option} {path} is {found}; pass {wanted} there.")
     start = path if folder else path.parent  # a file is written beside itself, then renamed
-    existing = next(p for p in (start, *start.parents) if p.exists())
+    existing = next(p for p in (start, *start.parents) if visible(p))
     if not existing.is_dir():
         raise WorldagentError(f"{option} {path}: {existing} is a file, not a folder; choose another {option}.")
     if not can_create_files_in(existing):
         raise WorldagentError(f"{option} {path}: cannot create files in {existing}; choose a writable {option} or change the folder's permissions.")
     return path
+
+
+def visible(path: Path) -> bool:
+    """Whether ``path`` exists as far as this process can see (False inside a folder it may not read)."""
+    try:
+        return path.exists()
+    except OSError:
+        return False
 
 
 def can_create_files_in(folder: Path) -> bool:

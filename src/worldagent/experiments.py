@@ -601,6 +601,7 @@ def failure_rate(
     target_width: float | None = None,
     seed: int = 0,
     progress: bool = True,
+    say: Any = None,
 ) -> dict[str, Any]:
     """P(event) for worlds G(z), z ~ N(0, I), by Monte Carlo and/or importance sampling (DESIGN.md "Failure probability").
 
@@ -616,44 +617,17 @@ def failure_rate(
         importance: an ``analysis.failure_rate.ImportanceConfig`` (None: the defaults).
         target_width: stop once the 95% interval is within ±target_width · P.
         seed: seed of the latents and episodes.
+        say: called with a line before a cost is spent (the pool's describing) or a fallback.
 
     Returns:
-        {method: ``Estimate``} for "mc" and/or "is".
+        {method: ``Estimate``} for "mc" and/or "is" (``analysis.stored.estimate_campaign``).
     """
-    from dataclasses import asdict
-    from functools import partial
-
     from worldagent.analysis import failure_rate as fr
     from worldagent.analysis import stored
     from worldagent.influence.selection import parse_selection
-    from worldagent.progress import progress_bar
 
-    methods = fr.methods(method)
     importance = importance or fr.ImportanceConfig()
     fr.check_budget(worlds, target_width, importance)
     selection = parse_selection(event, setup.spec.name)
-    objective = Objective(setup.spec.name, selection.metrics[0], True)
-    outcomes = LatentObjective(objective, setup.env, setup.policy, setup.generator, setup.repeats, setup.params, keep_worlds=False)
-    found = {}
-    for name in methods:
-        searched = importance.pilot if importance.proposal == "surrogate" else importance.max_rounds * importance.round_worlds
-        total = worlds + (searched if name == "is" else 0)
-        config = {"event": selection.text, "repeats": setup.repeats, "batch": fr.BATCH, "agent": agent_record(setup.policy)}
-        config |= {"worlds": int(worlds), "target_width": target_width}  # what ``analysis.stored.read_estimate`` replays
-        config |= asdict(importance) if name == "is" else {}
-        campaign = store.open_campaign(
-            stored.campaign_name(name, selection.text, seed), setup.spec.name, "margin", True, name, total, seed, config, True
-        )
-        with progress_bar(f"{name}: P({selection.describe()})", total=total, enabled=progress) as advance:
-            evaluate = stored.StoredEvaluate(store, campaign, outcomes, partial(fr.score_worlds, selection), setup.backend, advance)
-            describe = None
-            if name == "is" and importance.proposal == "surrogate":
-                from worldagent.analysis.surrogate import distinct_describer, kept_describer, pool_file
-
-                path = pool_file(store.path, campaign.name)
-                if next(store.iter_evaluations(campaign.name), None) is None:  # a new campaign: descriptors of this generator
-                    path.unlink(missing_ok=True)
-                describe = kept_describer(path, distinct_describer(setup.spec, setup.generator, progress=progress))
-            estimator = partial(fr.importance_sampling, config=importance, describe=describe) if name == "is" else fr.monte_carlo
-            found[name] = estimator(evaluate, setup.generator.latent_dim, worlds, seed=seed, batch=fr.BATCH, target_width=target_width)
-    return found
+    common = dict(worlds=worlds, importance=importance, target_width=target_width, seed=seed, progress=progress, say=say)
+    return {name: stored.estimate_campaign(store, setup, selection, name, **common) for name in fr.methods(method)}

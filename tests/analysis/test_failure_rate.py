@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from worldagent.analysis import cross_entropy, mixtures, stored, surrogate
 from worldagent.analysis import failure_rate as fr
-from worldagent.analysis import mixtures, stored, surrogate
 from worldagent.analysis.stored import failure_names, read_estimate
 from worldagent.cli import app
 from worldagent.commands.failure_rate import estimate_line
@@ -105,26 +105,28 @@ def test_stopping_at_the_kth_hit_keeps_the_interval_exact_and_the_estimate_unbia
         fr.inverse_binomial(0, 10)
 
 
-@pytest.mark.parametrize("proposal", fr.PROPOSALS)
-def test_importance_sampling_covers_the_closed_form_with_ten_times_fewer_worlds_than_monte_carlo(proposal):
-    config = fr.ImportanceConfig(proposal=proposal)
-    estimate = fr.importance_sampling(toy, 10, 2000, seed=0, config=config)
-    assert estimate.low <= P_TOY <= estimate.high
-    assert estimate.worlds == estimate.search_worlds + 2000 and estimate.episodes == estimate.worlds
-    width = estimate.relative_half_width
-    assert width < 0.25
-    monte_carlo_worlds = Z95**2 * (1 - P_TOY) / (P_TOY * width**2)  # binomial: half-width z·sqrt(P(1-P)/n) = width·P
-    assert 10 * estimate.worlds <= monte_carlo_worlds
-    assert 0 < estimate.event_ess <= estimate.hits and 0 < estimate.ess <= 2000
-    assert fr.importance_sampling(toy, 10, 2000, seed=0, config=config) == estimate  # deterministic given the seed
+@pytest.mark.parametrize("proposal, gain", [("search", 10), ("surrogate", 3)])
+def test_importance_sampling_covers_the_closed_form_with_fewer_worlds_than_monte_carlo(proposal, gain):
+    """The search's normal interval reaches 10x on this toy. The surrogate's strata keep sampling the pool's bulk (a
+    tenth of P assumed there) and its interval allows for a hit there, so it earns less where its model is exact;
+    one bulk hit (5% of P lies there after the ridge's shrinkage) widens a seed's interval, hence the median."""
+    config = fr.ImportanceConfig(proposal=proposal, pool=None if proposal == "search" else 50_000)
+    found = [fr.importance_sampling(toy, 10, 2000, seed=seed, config=config) for seed in range(1 if proposal == "search" else 4)]
+    assert all(e.low <= P_TOY <= e.high and e.fallback is None for e in found)
+    assert all(e.worlds == e.search_worlds + 2000 and e.episodes == e.worlds for e in found)
+    assert 0 < found[0].event_ess <= found[0].hits and 0 < found[0].ess <= 2000
+    widths = np.array([e.relative_half_width for e in found])
+    monte_carlo_worlds = Z95**2 * (1 - P_TOY) / (P_TOY * widths**2)  # binomial: half-width z·sqrt(P(1-P)/n) = width·P
+    assert np.median(monte_carlo_worlds) >= gain * found[0].worlds
+    assert fr.importance_sampling(toy, 10, 2000, seed=0, config=config) == found[0]  # deterministic given the seed
 
 
 def test_the_surrogate_covers_two_regions_and_its_interval_counts_the_pool():
-    found = [fr.importance_sampling(two_sided, 10, 1000, seed=seed) for seed in range(6)]
-    assert sum(e.low <= P_TWO <= e.high for e in found) >= 5 and all(0.6 < e.estimate / P_TWO < 1.6 for e in found)
-    assert all(e.search_worlds == fr.ImportanceConfig().pilot and e.worlds == e.search_worlds + 1000 for e in found)
-    small = fr.importance_sampling(two_sided, 10, 1000, seed=0, config=fr.ImportanceConfig(pool=20_000))
-    pool_alone = Z95 * np.sqrt(small.estimate * (1 - small.estimate) / 20_000)  # the pool's binomial spread
+    found = [fr.importance_sampling(two_sided, 10, 2000, seed=seed) for seed in range(6)]
+    assert all(e.low <= P_TWO <= e.high for e in found) and all(0.6 < e.estimate / P_TWO < 1.6 for e in found)
+    assert all(e.search_worlds == fr.ImportanceConfig().pilot and e.worlds == e.search_worlds + 2000 for e in found)
+    small = fr.importance_sampling(two_sided, 10, 2000, seed=0, config=fr.ImportanceConfig(pool=5_000))
+    pool_alone = Z95 * np.sqrt(small.estimate * (1 - small.estimate) / 5_000)  # the pool's binomial spread
     assert (small.high - small.low) / 2 >= pool_alone and small.relative_half_width > found[0].relative_half_width
 
 
@@ -135,10 +137,10 @@ def product(z: np.ndarray, seeds: np.ndarray) -> fr.Scored:
 
 def test_the_surrogate_reads_the_worlds_descriptors():
     config = fr.ImportanceConfig(pool=50_000)
-    blind = fr.importance_sampling(product, 10, 1000, seed=0, config=config)
-    seeing = fr.importance_sampling(product, 10, 1000, seed=0, config=config, describe=lambda z: (z[:, 0] * z[:, 1])[:, None])
-    assert seeing.event_ess > 10 * blind.event_ess and seeing.relative_half_width < blind.relative_half_width / 2
-    assert seeing.low <= P_PRODUCT <= seeing.high
+    blind = fr.importance_sampling(product, 10, 3000, seed=0, config=config)
+    seeing = fr.importance_sampling(product, 10, 3000, seed=0, config=config, describe=lambda z: (z[:, 0] * z[:, 1])[:, None])
+    assert seeing.fallback is None and seeing.low <= P_PRODUCT <= seeing.high
+    assert blind.fallback is not None or seeing.relative_half_width < blind.relative_half_width / 2  # blind: no gain predicted
 
 
 def _product_tail() -> float:
@@ -171,8 +173,8 @@ def test_surrogate_features_and_chances():
 
 
 def test_importance_sampling_learns_the_prior_mean_on_the_event():
-    spend = fr._Spender(toy, 0)
-    proposal, best, hits = fr.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig())
+    spend = fr.Spender(toy, 0)
+    proposal, best, hits = cross_entropy.learn_proposal(spend, np.random.default_rng(0), 4, fr.ImportanceConfig())
     conditional_mean = NormalDist().pdf(THRESHOLD) / P_TOY  # E[z0 | z0 > 3] = 3.28
     mean = proposal.shares @ proposal.centres  # one region: BIC may split it, but the mixture's mean stays there
     assert mean[0] == pytest.approx(conditional_mean, abs=0.3) and np.all(np.abs(mean[1:]) < 0.4)
@@ -192,8 +194,8 @@ SEARCH = fr.ImportanceConfig(proposal="search")
 
 def test_a_mixture_covers_two_regions_where_a_single_mean_shift_fails():
     single = fr.ImportanceConfig(components=1, proposal="search")
-    shift, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, single)
-    mixture, _, _ = fr.learn_proposal(fr._Spender(two_sided, 0), np.random.default_rng(0), 10, SEARCH)
+    shift, _, _ = cross_entropy.learn_proposal(fr.Spender(two_sided, 0), np.random.default_rng(0), 10, single)
+    mixture, _, _ = cross_entropy.learn_proposal(fr.Spender(two_sided, 0), np.random.default_rng(0), 10, SEARCH)
     assert len(shift.shares) == 1 and abs(shift.centres[0, 0]) > 2.5  # one side only: the other is left to the prior
     assert sorted(np.sign(mixture.centres[:, 0])) == [-1, 1] and np.all(np.abs(mixture.centres[:, 0]) > 2.5)
     assert np.all(mixture.shares > 0.25)
@@ -264,16 +266,16 @@ def test_bad_input_is_refused_with_one_line(call, message):
     assert message in one_line(error)
 
 
-def test_an_event_that_never_occurs_is_refused_by_importance_sampling():
+def test_an_event_that_never_occurs_is_refused_by_the_search_and_bounded_by_monte_carlo():
     never = lambda z, s: fr.Scored(-np.abs(z[:, 0]) - 1, np.zeros(len(z), bool), len(z))  # |z0| < -1: impossible
     with pytest.raises(WorldagentError) as error:
         fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(round_worlds=100, max_rounds=3, proposal="search"))
     assert "never occurred in the 500 worlds sampled" in one_line(error) and "check the thresholds" in str(error.value)
-    with pytest.raises(WorldagentError) as error:
-        fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(pool=5000))
-    assert "never occurred in the 500 worlds sampled" in one_line(error) and "raise the pilot or the pool" in str(error.value)
     nothing = fr.monte_carlo(never, 10, 500)  # Monte Carlo's answer is an upper bound
     assert (nothing.estimate, nothing.low, nothing.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 500)))
+    fell_back = fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(pool=5000))  # no model of it: no gain predicted
+    assert fell_back.method == "mc" and "cannot place the event" in fell_back.fallback and fell_back.worlds == 500 + 500
+    assert (fell_back.estimate, fell_back.low, fell_back.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 1000)))
 
 
 # -- the command -----------------------------------------------------------------------------------
@@ -288,15 +290,18 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
     args = [*common, "--event", "return < 60", "--worlds", "30", "--pool", "2000", "--pilot", "20"]
     result = runner.invoke(app, ["failure-rate", *args])
     assert result.exit_code == 0, result.output
-    assert "Monte Carlo: P = " in result.output and "importance sampling: P = " in result.output and "ESS" in result.output
+    estimates = [line for line in result.output.splitlines() if ": P = " in line]
+    assert estimates[0].startswith("Monte Carlo: P = ") and estimates[1].startswith("importance sampling fell back to Monte Carlo: P = ")
+    assert "s wall time" in result.output and "fell back: importance sampling is predicted to gain" in result.output  # 20 worlds of pilot
     with RunStore(tmp_path / "run", create=False) as store:
         names = [c.name for c in store.campaigns()]
         assert names == ["failure-mc-return<60-s0", "failure-is-return<60-s0"]
         assert len(store.evaluations(names[0])) == 30 and len(store.evaluations(names[1])) == 20 + 30
-    assert runner.invoke(app, ["failure-rate", *args]).output == result.output  # resumed: the same lines
+    again = runner.invoke(app, ["failure-rate", *args]).output
+    assert [line for line in again.splitlines() if ": P = " in line] == estimates  # resumed: the same estimates (the same fallback)
     with RunStore(tmp_path / "run", create=False) as store:  # read back with no agent or generator: the same estimates
         assert failure_names(store) == names
-        assert [estimate_line(read_estimate(store, name)) for name in names] == result.output.strip().splitlines()[:2]
+        assert [estimate_line(read_estimate(store, name)) for name in names] == estimates
         with pytest.raises(WorldagentError, match="not a failure-rate campaign"):
             read_estimate(store, "random-return-s0")
     for extra, message in [
@@ -305,6 +310,10 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
         (["--event", "return < 60", "--round-worlds", "5"], "fewer than 2 elites"),
         (["--event", "return < 60", "--pilot", "500", "--pool", "400"], "pilot must be a part of the pool"),
         (["--event", "return < 60", "--method", "bootstrap"], "use mc, is or both"),
+        (["--event", "return < 60", "--seed", "-1"], "--seed is -1"),
+        (["--event", "return < 60", "--pool", "1000000000000"], "above the cap"),
+        (["--event", "return < 60", "--repeats", "100000000"], "above the cap"),
+        (["--event", "return < 60", "--out", str(gen / "generator.json")], "is a file"),
     ]:
         bad = runner.invoke(app, ["failure-rate", *common, *extra])
         lines = bad.output.strip().splitlines()

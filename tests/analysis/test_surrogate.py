@@ -28,20 +28,20 @@ def test_the_describer_matches_the_specs_descriptors_on_each_world(racing_genera
         surrogate.distinct_describer(spec, racing_generator, names=["speed"])
 
 
-def test_kept_descriptors_are_read_back_and_a_missing_file_is_refused(tmp_path):
+def test_cached_descriptors_are_read_back_extended_and_a_missing_file_is_refused(tmp_path):
     calls = []
 
     def describe(z):
         calls.append(len(z))
         return z[:, :1] * 2
 
-    path = surrogate.pool_file(tmp_path / "store.sqlite", "failure-is-return<60-s0")
-    assert path == tmp_path / "pools" / "failure-is-return<60-s0.npy"
-    z = np.arange(12.0).reshape(6, 2)
-    first = surrogate.kept_describer(path, describe)(z)
-    again = surrogate.kept_describer(path, None)(z)  # a replay with no generator reads the file
-    np.testing.assert_array_equal(first, again)
-    np.testing.assert_array_equal(first[:, 0], z[:, 0] * 2)
-    assert calls == [6]
+    path = surrogate.pool_cache(tmp_path / "store.sqlite", "f00d", 3)
+    z = np.arange(24.0).reshape(12, 2)
+    first = surrogate.cached_describer(path, describe)(z[:6])
+    longer = surrogate.cached_describer(path, describe)(z)  # only the 6 new rows are described
+    again = surrogate.cached_describer(path, None)(z)  # a replay with no generator reads the file
+    np.testing.assert_array_equal(longer[:6], first)
+    np.testing.assert_array_equal(again[:, 0], z[:, 0] * 2)
+    assert calls == [6, 6]
     with pytest.raises(WorldagentError, match="missing or stale; rerun `worldagent failure-rate`"):
-        surrogate.kept_describer(tmp_path / "pools" / "other.npy", None)(z)
+        surrogate.cached_describer(tmp_path / "pools" / "other.npz", None)(z)

@@ -9,46 +9,17 @@ closed-form toy (event ``z[0] > 3``) tests them without any environment:
   (Clopper–Pearson) interval, or, sampled to a target width, stopped at a fixed k-th hit with
   that rule's exact interval (inverse binomial sampling). Honest at any P, but a rare event
   needs ~ 4 / (P r²) worlds for a 95% interval of ±r·P.
-- ``importance_sampling``: batches from a proposal q mixed with the prior, α N(0, I) + (1 − α) g,
-  so that every weight p/q ≤ 1/α; P = mean(w · 1[event]). The proposal g is one of two
-  (``ImportanceConfig.proposal``):
+- ``importance_sampling``: worlds drawn where the event is likelier, weighted back to the prior;
+  one of two samplers (``ImportanceConfig.proposal``):
 
-  - ``surrogate`` (the default; ``surrogate_sampling``, ``analysis.surrogate``): a pool of
-    prior worlds is decoded and described (no episode); a pilot of them is played and a model
-    of the event's margin from the worlds' descriptors weights the pool. On racing it reached
-    Monte Carlo's width with 23x fewer episodes at p ~ 1e-3 and 145x at 1e-4, where the search
-    below reached 3.3x and 14.5x: the search must find an event's cells in latent space one by
-    one, while the descriptors see all of them at once. On harvest, 12x and 22x, once its
-    descriptors said how far the spawns walk to the apples (docs/failure-rate.md).
-  - ``search``, in two stages:
-
-  1. *Search*: the cross-entropy method (Rubinstein & Kroese) learns a mixture of shifted priors
-     Σ_k π_k N(c_k, I). Each round samples worlds, ranks them by the event's *margin* (how far
-     past its thresholds a world is; > 0 inside), lowers the bar to the top ``elite_fraction``
-     (never past the event itself), and fits the mixture to the elites weighted by p/q: the
-     cross-entropy update in this family is weighted EM, run for 1 to ``components``
-     components and kept at the lowest BIC.
-  2. *Sampling*, in batches from the defensive mixture q = α N(0, I) + (1 − α) g, which keeps
-     every weight w = p/q ≤ 1/α; P = mean(w · 1[event]) over all batches. Before each batch, g
-     is refitted: ``wide_share`` of the search's mixture plus N(z_i, h² I) kernels (h =
-     ``bandwidth``) around every event world z_i found so far, shares ∝ its weight: a kernel
-     estimate of the prior on the event that grows as regions are found. Each batch is unbiased
-     given the ones before, so the mean is unbiased; its interval treats the terms as
-     independent. The search's worlds are spent, counted, and not in the mean.
-
-  Why a mixture: an event is often several regions far apart in latent space (distinct tracks
-  or maps). A single mean shift moves toward one of them, or toward their average where none
-  lies, and leaves the others to the prior's share α: on the toy |z0| > 3.2 its interval covered
-  P in 9 of 20 seeds, the mixture's in 20 of 20 (``tests``). Why kernels after the search: a
-  generator that repairs to its dataset's worlds makes the event a union of small cells (one per
-  track, per-coordinate spread ~0.5), where a shifted prior of scale 1 puts a few percent of its
-  draws; kernels of bandwidth 0.7 around the hits put most of them there (racing, p ≈ 1e-4: 7-15x
-  fewer worlds than Monte Carlo instead of 3-4x; benchmarks/results/failure-rate.json,
-  docs/failure-rate.md). Why not narrower, or fitted, scales: in 10 dimensions a component
-  narrower than the event's extent makes log-weights vary like a χ² sum over the coordinates;
-  components with fitted scales (floor 0.3-0.5) locked onto one or two cells and their intervals
-  missed P by 2-20x; a fitted diagonal scale covered 1 − Φ(3) on the toy z0 > 3 in ~55% of 40
-  seeds against 97% for the shifted prior.
+  - ``surrogate`` (the default; ``surrogate_sampling``, ``analysis.pooled``): a pool of prior
+    worlds is described (no episode); a pilot of them is played, a model of the event's margin
+    from the worlds' descriptors (``analysis.surrogate``) cuts the pool into strata of known
+    mass, and each stratum is sampled as much as the mass it may hold asks. After the pilot it
+    predicts its gain over Monte Carlo (episodes and seconds, describing the pool included) and
+    falls back to Monte Carlo below 1.5x. Its interval counts a stratum with no hit yet.
+  - ``search`` (``analysis.cross_entropy``): a cross-entropy search for a mixture of shifted
+    priors, then kernels around the event worlds found, mixed with the prior.
 
 The estimator's g-th call of ``evaluate`` is generation g, its worlds played with
 ``evaluation_seed(seed, g, slot)`` as in a campaign. ``StoredEvaluate`` makes ``evaluate`` from
@@ -61,24 +32,23 @@ keeps the store's campaigns readable and resuming a single lookup.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass
-from statistics import NormalDist
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from worldagent.analysis import surrogate
-from worldagent.analysis.mixtures import (
-    Hits,
-    Proposal,
-    around_hits,
-    blend,
-    effective_sample_size,
-    fit_mixture,
-    importance_weights,
-    sample_mixture,
+from worldagent.analysis import pooled
+from worldagent.analysis.intervals import (  # noqa: F401  (the interval functions are part of this module's interface)
+    bounded,
+    check_confidence,
+    clopper_pearson,
+    hits_for_width,
+    inverse_binomial,
+    weighted_interval,
 )
+from worldagent.analysis.mixtures import effective_sample_size
 from worldagent.errors import WorldagentError
 from worldagent.search.campaign import evaluation_seed
 
@@ -86,10 +56,9 @@ METHODS = ("mc", "is")
 PROPOSALS = ("search", "surrogate")
 BATCH = 1000  # worlds per call of evaluate (a generation of the store campaign)
 MC_STREAM, IS_STREAM = 2, 3  # latent streams default_rng([seed, stream]): not random search's (1)
-MIN_HITS = 10  # events seen before a target width may stop sampling (the intervals are poor below)
-# Batches the surrogate samples before a target width may stop it: after one batch of 250 its normal interval covered
-# racing's brute force in 12 of 15 seeds x events (docs/failure-rate.md). The search keeps its recorded one-batch rule.
-MIN_BATCHES = 2
+POOL_LATENTS, POOL_DRAWS, FALLBACK_DRAWS = 1, 2, 3  # the surrogate's sub-streams of IS_STREAM
+MIN_HITS = 10  # events seen before a target width may stop the search's sampling (the intervals are poor below)
+MAX_WORLDS = 10_000_000  # worlds (or a pool) larger than this are refused before any work: a typo, not a budget
 
 
 @dataclass(frozen=True)
@@ -108,6 +77,7 @@ class Scored:
 
 
 Evaluate = Callable[[np.ndarray, np.ndarray], Scored]
+Say = Callable[[str], None]
 
 
 @dataclass(frozen=True)
@@ -115,15 +85,19 @@ class Estimate:
     """P(event) with its interval and cost.
 
     Attributes:
-        method: "mc" or "is".
-        estimate, low, high: P and its interval.
-        worlds, episodes: all spent, the proposal's search included.
+        method: "mc" or "is" (an importance-sampling estimate that fell back is "mc", with ``fallback``).
+        estimate, low, high: P and its interval, all in [0, 1] with low <= estimate <= high.
+        worlds, episodes: all spent, the proposal's search or pilot included.
         hits: worlds in the event among those the estimate averages.
         confidence: of the interval.
-        search_worlds: of ``worlds``, those spent learning the proposal (importance sampling).
+        search_worlds: of ``worlds``, those spent learning the proposal (importance sampling's search or pilot).
         ess: (Σw)² / Σw² over the sampled worlds' weights (importance sampling).
         event_ess: the same over the weights of the worlds in the event: how many equally
             weighted hits the estimate is worth.
+        note: why the interval is wider than asked (a cap), or None.
+        fallback: why importance sampling ran Monte Carlo instead, or None.
+        plan: what the surrogate's pilot predicted (``pooled.Plan.as_dict``; timings, so not compared).
+        seconds: wall time of the estimate (not compared).
     """
 
     method: str
@@ -137,6 +111,10 @@ class Estimate:
     search_worlds: int = 0
     ess: float | None = None
     event_ess: float | None = None
+    note: str | None = None
+    fallback: str | None = None
+    plan: dict | None = field(default=None, compare=False)
+    seconds: float = field(default=0.0, compare=False)
 
     @property
     def relative_half_width(self) -> float:
@@ -155,7 +133,7 @@ class ImportanceConfig:
         round_worlds: worlds per cross-entropy round.
         max_rounds: rounds at most (the search stops once the elites are all in the event).
         elite_fraction: the top fraction of a round the proposal is fitted to.
-        prior_weight: α, the prior's share of the mixture (weights ≤ 1/α).
+        prior_weight: α, the prior's share of the search's mixture (weights ≤ 1/α).
         components: shifted priors in the search's proposal at most (1: a single mean shift);
             the number is chosen per round by BIC on the weighted elites.
         bandwidth: after the search, the proposal is N(z_i, bandwidth² I) around every event
@@ -163,10 +141,12 @@ class ImportanceConfig:
             keep the search's mixture of shifted priors).
         wide_share: the search's mixture's share of g beside the kernels: it keeps sampling around
             the regions the search found, where kernels may not reach yet.
-        proposal: "search" (the cross-entropy method above) or "surrogate": a pool of ``pool``
-            worlds from the prior, ``pilot`` of them evaluated, the rest drawn with the chances
-            a model of their descriptors gives (``analysis.surrogate``; ``round_worlds`` to
-            ``wide_share`` then unused).
+        proposal: "search" (``analysis.cross_entropy``) or "surrogate" (``analysis.pooled``): a
+            pool of prior worlds, ``pilot`` of them evaluated, the rest stratified by a model of
+            their descriptors (``round_worlds`` to ``wide_share`` then unused).
+        pool: the surrogate's pool of described prior worlds (None: as many as ``pool_seconds`` of
+            describing buy, timed on a sample, at most ``pooled.DEFAULT_POOL``).
+        pool_seconds: the time budget for describing the pool when ``pool`` is None.
     """
 
     round_worlds: int = 500
@@ -177,16 +157,20 @@ class ImportanceConfig:
     bandwidth: float | None = 0.7
     wide_share: float = 0.3
     proposal: str = "surrogate"
-    pool: int = 200_000
+    pool: int | None = None
     pilot: int = 500
+    pool_seconds: float = pooled.POOL_SECONDS
 
     def validate(self) -> None:
         if self.proposal not in PROPOSALS:
             raise WorldagentError(f"proposal {self.proposal!r}; use {' or '.join(PROPOSALS)}.")
-        _check_count("pool", self.pool)
         _check_count("pilot", self.pilot)
-        if self.pilot >= self.pool:
-            raise WorldagentError(f"pilot={self.pilot} of a pool of {self.pool}; the pilot must be a part of the pool (raise pool).")
+        if self.pool is not None:
+            _check_count("pool", self.pool, pooled.MAX_POOL)
+            if self.pilot >= self.pool:
+                raise WorldagentError(f"pilot={self.pilot} of a pool of {self.pool}; the pilot must be a part of the pool (raise pool).")
+        if not self.pool_seconds > 0:
+            raise WorldagentError(f"pool_seconds={self.pool_seconds}; pass a positive time budget in seconds.")
         _check_count("round_worlds", self.round_worlds)
         _check_count("max_rounds", self.max_rounds)
         _check_count("components", self.components)
@@ -199,80 +183,6 @@ class ImportanceConfig:
             raise WorldagentError(f"bandwidth={self.bandwidth}; pass a standard deviation in (0, 1], or None for the search's mixture.")
         if self.round_worlds * self.elite_fraction < 2:
             raise WorldagentError(f"{self.round_worlds} worlds per round keep fewer than 2 elites; raise round_worlds or elite_fraction.")
-
-
-# -- intervals -------------------------------------------------------------------------------------
-
-
-def clopper_pearson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """The exact binomial (Clopper–Pearson) interval of a probability with k successes in n trials.
-
-    Beta quantiles from ``scipy.stats.beta`` (scipy comes with jax).
-
-    Returns:
-        (low, high): low = 0 when k = 0, high = 1 when k = n.
-    """
-    from scipy.stats import beta
-
-    if isinstance(k, bool) or isinstance(n, bool) or int(k) != k or int(n) != n or not 0 <= k <= n or n < 1:
-        raise WorldagentError(f"k={k}, n={n}; pass whole numbers with 0 <= k <= n and n >= 1.")
-    _check_confidence(confidence)
-    tail = (1 - confidence) / 2
-    low = 0.0 if k == 0 else float(beta.ppf(tail, k, n - k + 1))
-    high = 1.0 if k == n else float(beta.ppf(1 - tail, k + 1, n - k))
-    return low, high
-
-
-def inverse_binomial(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """The exact interval of a probability when sampling stopped at the k-th success, on trial n.
-
-    The k-th success comes by trial n exactly when n trials hold k or more successes, so
-    P(N <= n) and P(N >= n) are binomial tails and their bounds Beta quantiles. The unbiased
-    estimate under this rule is (k − 1) / (n − 1) (Haldane, 1945).
-
-    Returns:
-        (low, high): high = 1 when k = n.
-    """
-    from scipy.stats import beta
-
-    if isinstance(k, bool) or isinstance(n, bool) or int(k) != k or int(n) != n or not 1 <= k <= n:
-        raise WorldagentError(f"k={k}, n={n}; pass whole numbers with 1 <= k <= n.")
-    _check_confidence(confidence)
-    tail = (1 - confidence) / 2
-    return float(beta.ppf(tail, k, n - k + 1)), 1.0 if k == n else float(beta.ppf(1 - tail, k, n - k))
-
-
-def hits_for_width(target_width: float, confidence: float = 0.95) -> int:
-    """The fewest hits k at which inverse binomial sampling's interval is within ±target_width · P for any rare P.
-
-    For a rare event the interval is [Γ_k(α/2), Γ_k(1 − α/2)] / n, a Gamma(k) quantile pair
-    about the estimate (k − 1) / n, so its relative half-width falls with k alone (±50% at 95%:
-    k = 18). Larger P narrow it.
-    """
-    from scipy.stats import gamma
-
-    tail = (1 - confidence) / 2
-    k = 2
-    while (gamma.ppf(1 - tail, k) - gamma.ppf(tail, k)) / (2 * (k - 1)) > target_width:
-        k += 1
-    return k
-
-
-def weighted_interval(terms: np.ndarray, confidence: float = 0.95, pool: int | None = None) -> tuple[float, float, float]:
-    """(mean, low, high) of importance-sampling terms f64[n] = w · 1[event].
-
-    A normal approximation: mean ± z · sd / √n, clipped to [0, 1]. It is good once the event
-    has been hit a few dozen times with weights of similar size (``Estimate.event_ess``). With
-    ``pool`` (worlds drawn from a pool of that many prior worlds), the pool's own binomial
-    variance mean · (1 − mean) / pool is added.
-    """
-    _check_confidence(confidence)
-    terms = np.asarray(terms, np.float64)
-    mean = float(terms.mean())
-    error = float(terms.std(ddof=1) / np.sqrt(len(terms))) if len(terms) > 1 else float("inf")
-    error = error if pool is None else float(np.sqrt(error**2 + mean * (1 - mean) / pool))
-    spread = NormalDist().inv_cdf(1 - (1 - confidence) / 2) * error
-    return mean, max(0.0, mean - spread), min(1.0, mean + spread)
 
 
 # -- the event -------------------------------------------------------------------------------------
@@ -330,22 +240,40 @@ def monte_carlo(
     Returns:
         An ``Estimate`` (estimate 0 and high = the interval's bound when no world is in the event).
         When it stopped at a hit, ``worlds`` counts the worlds up to that hit and ``episodes``
-        all that were played (the rest of its batch too).
+        all that were played (the rest of its batch too). When ``worlds`` ran out short of the
+        width, ``note`` says so and how many worlds the width needs.
     """
     check_budget(worlds, target_width, dim=dim, batch=batch, confidence=confidence)
-    rng = np.random.default_rng([seed, MC_STREAM])
-    spend, hits = _Spender(evaluate, seed), 0
+    started = time.perf_counter()
+    found = sample_prior(Spender(evaluate, seed), np.random.default_rng([seed, MC_STREAM]), dim, worlds, batch, confidence, target_width)
+    return _timed(found, started)
+
+
+def sample_prior(
+    spend: Spender, rng: np.random.Generator, dim: int, worlds: int, batch: int, confidence: float, target_width: float | None,
+    seen: np.ndarray | None = None,
+) -> Estimate:  # fmt: skip
+    """Monte Carlo's sampling (``monte_carlo``) with ``spend``; ``seen`` bool[m]: events of prior worlds already played
+    (a pilot), counted first, as the stream's first m worlds."""
+    seen = np.zeros(0, bool) if seen is None else np.asarray(seen, bool)
     needed = None if target_width is None else hits_for_width(target_width, confidence)
-    while spend.worlds < worlds:
-        before = spend.worlds
-        event = spend(rng.standard_normal((min(batch, worlds - spend.worlds), dim))).event
-        if needed is not None and hits + event.sum() >= needed:
-            stop = before + int(np.flatnonzero(event)[needed - hits - 1]) + 1
+    events, total = [seen], len(seen)
+    while total < worlds:
+        events.append(spend(rng.standard_normal((min(batch, worlds - total), dim))).event)
+        total += len(events[-1])
+        hit_at = np.flatnonzero(np.concatenate(events))
+        if needed is not None and len(hit_at) >= needed:
+            stop = int(hit_at[needed - 1]) + 1
             low, high = inverse_binomial(needed, stop, confidence)
             return Estimate("mc", (needed - 1) / (stop - 1), low, high, stop, spend.episodes, needed, confidence)
-        hits += int(event.sum())
-    low, high = clopper_pearson(hits, spend.worlds, confidence)
-    return Estimate("mc", hits / spend.worlds, low, high, spend.worlds, spend.episodes, hits, confidence)
+    hits = int(np.concatenate(events).sum())
+    low, high = clopper_pearson(hits, total, confidence)
+    estimate = Estimate("mc", hits / total, low, high, total, spend.episodes, hits, confidence)
+    if needed is not None and estimate.relative_half_width > target_width:
+        more = f"about {needed / estimate.estimate:,.0f}" if hits else f"more than {total:,}"
+        note = f"stopped at its cap of {total:,} worlds short of ±{target_width:.0%}: ±{estimate.relative_half_width:.0%} (the width needs {more} worlds)"
+        estimate = Estimate(**{**asdict(estimate), "note": note})
+    return estimate
 
 
 # -- importance sampling ---------------------------------------------------------------------------
@@ -362,48 +290,37 @@ def importance_sampling(
     confidence: float = 0.95,
     target_width: float | None = None,
     describe: Callable[[np.ndarray], np.ndarray] | None = None,
+    timing: Mapping[str, float] | None = None,
+    say: Say | None = None,
 ) -> Estimate:
-    """P(event) by importance sampling from a proposal learned by the cross-entropy method (module docstring), or
-    shaped by a surrogate (``config.proposal``, ``surrogate_sampling``).
-
-    The interval is a normal approximation on the weighted mean (``weighted_interval``).
+    """P(event) by importance sampling: ``surrogate_sampling`` or the cross-entropy search's (``config.proposal``).
 
     Args:
         evaluate, dim, seed, batch, confidence, target_width: as for ``monte_carlo``.
-        worlds: worlds sampled from the mixture after the search (at most, with ``target_width``).
-        config: the search's and the mixture's settings.
+        worlds: worlds sampled after the search or pilot (at most).
+        config: the sampler's settings.
         describe: ``(z f64[n, dim]) -> f64[n, k]`` descriptors of the worlds G(z), for the
             surrogate (None: it reads the latents only).
+        timing, say: the surrogate's (``surrogate_sampling``).
 
     Returns:
-        An ``Estimate``; ``worlds``, ``episodes`` include the search's (``search_worlds``).
+        An ``Estimate``; ``worlds``, ``episodes`` include the search's or pilot's (``search_worlds``).
 
     Raises:
-        WorldagentError: when no sampled world is in the event (impossible, or not found).
+        WorldagentError: when the search's sampled worlds never met the event.
     """
     check_budget(worlds, target_width, config, dim=dim, batch=batch, confidence=confidence)
+    started = time.perf_counter()
     if config.proposal == "surrogate":
-        return surrogate_sampling(
-            evaluate, dim, worlds, config=config, seed=seed, batch=batch, confidence=confidence, target_width=target_width, describe=describe
-        )
-    rng = np.random.default_rng([seed, IS_STREAM])
-    spend = _Spender(evaluate, seed)
-    proposal, best, hits = learn_proposal(spend, rng, dim, config)
-    wide, search_worlds = proposal, spend.worlds
-    weights, events = [], []
-    while spend.worlds - search_worlds < worlds:
-        if config.bandwidth is not None and len(hits.weights) >= 2:  # each batch is unbiased given the ones before
-            proposal = blend(wide, around_hits(hits.z, hits.weights, config.bandwidth, rng), config.wide_share)
-        z = sample_mixture(rng, proposal, config.prior_weight, min(batch, worlds - (spend.worlds - search_worlds)))
-        scored = spend(z)
-        weights.append(importance_weights(z, proposal, config.prior_weight))
-        events.append(scored.event)
-        hits = hits.add(z[scored.event], weights[-1][scored.event])
-        best = max(best, float(np.max(scored.margin)))
-        terms = np.concatenate(weights) * np.concatenate(events)
-        if _narrow_enough(int(np.sum(np.concatenate(events))), weighted_interval(terms, confidence)[1:], float(terms.mean()), target_width):
-            break
-    return _weighted_estimate(np.concatenate(weights), np.concatenate(events), spend, search_worlds, best, confidence)
+        found = surrogate_sampling(
+            evaluate, dim, worlds, config=config, seed=seed, batch=batch, confidence=confidence, target_width=target_width,
+            describe=describe, timing=timing, say=say,
+        )  # fmt: skip
+    else:
+        from worldagent.analysis.cross_entropy import search_sampling
+
+        found = search_sampling(evaluate, dim, worlds, config=config, seed=seed, batch=batch, confidence=confidence, target_width=target_width)
+    return _timed(found, started)
 
 
 def surrogate_sampling(
@@ -417,88 +334,69 @@ def surrogate_sampling(
     confidence: float = 0.95,
     target_width: float | None = None,
     describe: Callable[[np.ndarray], np.ndarray] | None = None,
+    timing: Mapping[str, float] | None = None,
+    say: Say | None = None,
 ) -> Estimate:
-    """P(event) by importance sampling over a pool of prior worlds, shaped by a surrogate (``analysis.surrogate``).
+    """P(event) from a pool of prior worlds stratified by a surrogate of their descriptors (``analysis.pooled``).
 
-    1. *Pool*: M = ``config.pool`` latents z ~ N(0, I), described (a decode each, no episode).
-    2. *Pilot*: the pool's first ``config.pilot`` worlds are evaluated; a ridge regression of
-       their margins on the worlds' features gives every pool world a chance c_j of the event.
-    3. *Sampling*: batches of pool worlds drawn with replacement with q_j = α/M + (1 − α) c_j / Σc,
-       each played afresh; a term is w_j · 1[event] with w_j = 1 / (M q_j) ≤ 1/α.
+    The pool's first ``config.pilot`` worlds are played and its first ``pooled.TIMED_SAMPLE``
+    described, both timed; the plan then says how large a pool ``config.pool_seconds`` buys
+    (when ``config.pool`` is None), how many draws the width needs, and the gain over Monte
+    Carlo. Below ``pooled.MIN_GAIN`` the pilot's worlds (prior draws) start a Monte Carlo
+    estimate (``fallback`` says why); else the rest of the pool is described and the strata drawn.
 
-    The terms' mean is unbiased for the pool's event fraction, which is unbiased for P; the
-    interval adds the pool's own binomial variance P(1 − P)/M (with P estimated) to the terms'.
-    The proposal is fixed after the pilot, so the terms are independent. The pilot's worlds are
-    spent, counted (``search_worlds``) and not in the mean.
+    Args:
+        timing: {"episode_seconds", "describe_seconds"} per world, to replay a recorded plan
+            (``Estimate.plan``) instead of measuring: a replayed pilot costs no time.
+        say: called with one line before the pool is described, or when falling back.
     """
-    rng = np.random.default_rng([seed, IS_STREAM])
-    pool = rng.standard_normal((config.pool, dim))
-    spend = _Spender(evaluate, seed)
-    margins = np.concatenate([spend(pool[start : min(start + batch, config.pilot)]).margin for start in range(0, config.pilot, batch)])
-    finite = margins[np.isfinite(margins)]
-    best = float(finite.max()) if finite.size else -np.inf
-    features = surrogate.features(pool, None if describe is None else describe(pool))
-    shares = surrogate.pool_shares(surrogate.log_chances(features, features[: config.pilot], margins), config.prior_weight)
-    weight_of = 1.0 / (config.pool * shares)
-    weights, events = [], []
-    while spend.worlds - config.pilot < worlds:
-        drawn = rng.choice(config.pool, size=min(batch, worlds - (spend.worlds - config.pilot)), p=shares)
-        scored = spend(pool[drawn])
-        weights.append(weight_of[drawn])
-        events.append(scored.event)
-        best = max(best, float(np.max(scored.margin)))
-        terms = np.concatenate(weights) * np.concatenate(events)
-        interval = weighted_interval(terms, confidence, config.pool)
-        enough = len(events) >= MIN_BATCHES and _narrow_enough(int(np.sum(np.concatenate(events))), interval[1:], interval[0], target_width)
-        if enough:
-            break
-    return _weighted_estimate(np.concatenate(weights), np.concatenate(events), spend, config.pilot, best, confidence, config.pool)
-
-
-def _weighted_estimate(
-    weight: np.ndarray, event: np.ndarray, spend: _Spender, search_worlds: int, best: float, confidence: float, pool: int | None = None
-) -> Estimate:
-    """Importance sampling's ``Estimate`` from the sampled worlds' weights f64[n] and events bool[n] (``pool``: the
-    surrogate's, else the search's)."""
-    if not event.any():
-        longer = "search longer (more rounds or worlds per round)" if pool is None else "raise the pilot or the pool"
-        hint = f"the closest came within {-best:.3g} of it: check the thresholds, or {longer}"
-        hint = "sample more worlds" if best >= 0 else hint
-        raise WorldagentError(f"the event never occurred in the {len(event)} worlds sampled for importance sampling ({hint}).")
-    estimate, low, high = weighted_interval(weight * event, confidence, pool)
-    return Estimate(
-        "is", estimate, low, high, spend.worlds, spend.episodes, int(event.sum()), confidence, search_worlds,
-        effective_sample_size(weight), effective_sample_size(weight * event),
+    say = say or (lambda line: None)
+    pool_rng = np.random.default_rng([seed, IS_STREAM, POOL_LATENTS])
+    spend = Spender(evaluate, seed)
+    sample = max(config.pilot + 1, min(pooled.TIMED_SAMPLE, config.pool or pooled.TIMED_SAMPLE))
+    pool = pool_rng.standard_normal((sample, dim))
+    play, describing = pooled.Clock(), pooled.Clock()
+    pilot = [
+        play.timed(spend, min(batch, config.pilot - start))(pool[start : min(start + batch, config.pilot)]) for start in range(0, config.pilot, batch)
+    ]
+    margins, seen = np.concatenate([s.margin for s in pilot]), np.concatenate([s.event for s in pilot])
+    described = None if describe is None else describing.timed(describe, sample)(pool)
+    timing = dict(timing or {"episode_seconds": play.per_world, "describe_seconds": describing.per_world if describe else 0.0})
+    size = pooled.pool_size(config.pool, config.pool_seconds, timing["describe_seconds"], sample)
+    strata = pooled.stratify(pooled.pool_chances(pool, described, sample, margins))
+    plan = pooled.plan(strata, size, config.pilot, worlds, target_width, timing["episode_seconds"], timing["describe_seconds"], sample, confidence)
+    if plan.fallback:
+        say(f"{plan.fallback}: Monte Carlo instead, starting from the pilot's {config.pilot:,} prior worlds.")
+        rng = np.random.default_rng([seed, IS_STREAM, FALLBACK_DRAWS])
+        found = sample_prior(spend, rng, dim, config.pilot + worlds, batch, confidence, target_width, seen)
+        return Estimate(**{**asdict(found), "search_worlds": 0, "fallback": plan.fallback, "plan": plan.as_dict()})
+    if size > sample:
+        minutes = plan.describe_total / 60
+        say(
+            f"describing the pool: {size:,} worlds, about {minutes:.1f} min ({timing['describe_seconds'] * 1e3:.2f} ms a world, timed on {sample:,})."
+        )
+        pool = np.concatenate([pool, pool_rng.standard_normal((size - sample, dim))])
+        described = None if describe is None else describe(pool)
+    strata = pooled.stratify(pooled.pool_chances(pool, described, sample, margins))
+    counts = pooled.draws_per_stratum(plan.draws, pooled.allocation(strata))
+    drawn = pooled.stratified_draws(np.random.default_rng([seed, IS_STREAM, POOL_DRAWS]), strata, counts)
+    event = np.concatenate([spend(pool[drawn[start : start + batch]]).event for start in range(0, len(drawn), batch)])
+    stratum = strata.labels[drawn]
+    hits = np.bincount(stratum[event], minlength=len(counts))
+    estimate, low, high, event_ess = pooled.stratified_estimate(hits, counts, strata.masses, size, confidence)
+    found = Estimate(
+        "is", estimate, low, high, spend.worlds, spend.episodes, int(event.sum()), confidence, config.pilot,
+        effective_sample_size((strata.masses / counts)[stratum]), event_ess, plan=plan.as_dict(),
     )  # fmt: skip
+    if target_width is not None and found.relative_half_width > target_width:
+        why = "its cap of --worlds" if plan.draws >= worlds else "the pilot's plan"
+        note = f"reached ±{found.relative_half_width:.0%}, short of ±{target_width:.0%}, after the {plan.draws:,} draws of {why}"
+        found = Estimate(**{**asdict(found), "note": note, "plan": plan.as_dict()})
+    return found
 
 
-def learn_proposal(
-    spend: Callable[[np.ndarray], Scored], rng: np.random.Generator, dim: int, config: ImportanceConfig
-) -> tuple[Proposal, float, Hits]:
-    """The cross-entropy method: (the proposal, the best margin seen, the event worlds found); ``spend(z) -> Scored``
-    evaluates."""
-    proposal, best, hits = Proposal.shift(np.zeros(dim)), -np.inf, Hits(np.zeros((0, dim)), np.zeros(0))
-    for _ in range(config.max_rounds):
-        z = sample_mixture(rng, proposal, config.prior_weight, config.round_worlds)
-        scored = spend(z)
-        finite = scored.margin[np.isfinite(scored.margin)]
-        if finite.size == 0:
-            raise WorldagentError("the event's metrics are NaN on every world of a search round; check the policy and the metrics.")
-        best = max(best, float(finite.max()))
-        level = min(0.0, float(np.quantile(finite, 1 - config.elite_fraction)))  # never past the event itself
-        elite, weights = elites(scored, level), importance_weights(z, proposal, config.prior_weight)
-        hits = hits.add(z[scored.event], weights[scored.event])
-        proposal = fit_mixture(z[elite], weights[elite], config.components, rng)
-        if level >= 0 and scored.event.sum() >= 2:  # fitted to the event's worlds: to the prior on it
-            break
-    return proposal, best, hits
-
-
-def elites(scored: Scored, level: float) -> np.ndarray:
-    """bool[n]: the worlds to fit: the event's once the bar reaches it, else those strictly past the bar (a tie at it,
-    from a discrete metric, would stall the search), else those at it; the first choice with two worlds or more."""
-    choices = ((scored.event,) if level >= 0 else ()) + (scored.margin > level,)
-    return next((choice for choice in choices if choice.sum() >= 2), scored.margin >= level)
+def _timed(estimate: Estimate, started: float) -> Estimate:
+    return Estimate(**{**asdict(estimate), "plan": estimate.plan, "seconds": time.perf_counter() - started})
 
 
 # -- settings --------------------------------------------------------------------------------------
@@ -516,7 +414,7 @@ def check_budget(worlds: int, target_width: float | None = None, importance: Imp
     confidence = counts.pop("confidence", 0.95)
     for name, value in {"worlds": worlds, **counts}.items():
         _check_count(name, value)
-    _check_confidence(confidence)
+    check_confidence(confidence)
     if target_width is not None and not target_width > 0:
         raise WorldagentError(f"target width {target_width}; pass a positive relative half-width such as 0.5 (±50%).")
     if importance is not None:
@@ -526,7 +424,7 @@ def check_budget(worlds: int, target_width: float | None = None, importance: Imp
 # -- helpers ---------------------------------------------------------------------------------------
 
 
-class _Spender:
+class Spender:
     """Calls ``evaluate`` one generation at a time with the campaign seeds; counts worlds and episodes."""
 
     def __init__(self, evaluate: Evaluate, seed: int):
@@ -542,16 +440,13 @@ class _Spender:
         return Scored(np.asarray(scored.margin, np.float64), np.asarray(scored.event, bool), int(scored.episodes))
 
 
-def _narrow_enough(hits: int, interval: tuple[float, float], estimate: float, target_width: float | None) -> bool:
+def narrow_enough(hits: int, interval: tuple[float, float], estimate: float, target_width: float | None) -> bool:
     """Whether sampling may stop: a target width reached with at least ``MIN_HITS`` hits."""
     return target_width is not None and hits >= MIN_HITS and estimate > 0 and (interval[1] - interval[0]) / (2 * estimate) <= target_width
 
 
-def _check_count(name: str, value: Any) -> None:
+def _check_count(name: str, value: Any, cap: int = MAX_WORLDS) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise WorldagentError(f"{name}={value!r}; pass a whole number of at least 1.")
-
-
-def _check_confidence(confidence: float) -> None:
-    if not 0 < confidence < 1:
-        raise WorldagentError(f"confidence={confidence}; pass a level between 0 and 1, e.g. 0.95.")
+    if value > cap:
+        raise WorldagentError(f"{name}={value:,} is over the cap of {cap:,}; pass a smaller number.")

@@ -9,15 +9,18 @@ probability table that way instead of copying a phase's log.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from worldagent.analysis import failure_rate as fr
-from worldagent.analysis.surrogate import kept_describer, pool_file
+from worldagent.analysis.surrogate import cached_describer
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
 from worldagent.search.campaign import REPLAY_TOLERANCE
@@ -102,6 +105,66 @@ def read_estimate(store, name: str) -> fr.Estimate:
     if campaign.optimiser == "is":
         fields = fr.ImportanceConfig.__dataclass_fields__
         importance = fr.ImportanceConfig(**{"proposal": "search", **{k: v for k, v in config.items() if k in fields}})  # older stores: search
-        describe = kept_describer(pool_file(store.path, name), None) if importance.proposal == "surrogate" else None
-        return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, describe=describe, **common)
+        surrogate = importance.proposal == "surrogate"
+        describe = cached_describer(store.path.parent / config["pool_cache"], None) if surrogate and "pool_cache" in config else None
+        timing = KeptTiming(timing_file(store.path, name)) if surrogate else None
+        return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, describe=describe, timing=timing, **common)
     return fr.monte_carlo(evaluate, dim, config["worlds"], **common)
+
+
+def timing_file(store_path: Any, campaign: str) -> Path:
+    """Where an importance-sampling campaign keeps the timings its plan used: ``pools/<campaign>.timing.json``."""
+    return Path(store_path).parent / "pools" / f"{campaign}.timing.json"
+
+
+class KeptTiming(dict):
+    """The per-world seconds a surrogate's plan used, read from ``path`` and written there once measured: a resumed or
+    replayed estimate (whose pilot is read back in no time) makes the same decisions (pool size, fallback)."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        super().__init__(json.loads(self.path.read_text()) if self.path.exists() else {})
+
+    def update(self, *args, **kwargs) -> None:
+        from worldagent.files import write_text
+
+        super().update(*args, **kwargs)
+        write_text(self.path, json.dumps(dict(self), indent=1) + "\n")
+
+
+def estimate_campaign(store, setup, selection, method: str, *, worlds: int, importance, target_width, seed: int, progress: bool, say=None):
+    """One estimate of ``selection`` by ``method`` ("mc" or "is"), as a store campaign that a rerun resumes.
+
+    The surrogate's pool descriptors are kept per generator (its fingerprint) and seed, whatever
+    the event (``surrogate.pool_cache``): a second event on the same seed describes nothing new.
+    """
+    from worldagent.agents.policy import agent_record
+    from worldagent.analysis.surrogate import distinct_describer, pool_cache
+    from worldagent.influence.cache import fingerprint
+    from worldagent.progress import progress_bar
+    from worldagent.search.objectives import LatentObjective, Objective
+
+    searched = importance.pilot if importance.proposal == "surrogate" else importance.max_rounds * importance.round_worlds
+    total = worlds + (searched if method == "is" else 0)
+    config = {"event": selection.text, "repeats": setup.repeats, "batch": fr.BATCH, "agent": agent_record(setup.policy)}
+    config |= {"worlds": int(worlds), "target_width": target_width}  # what ``read_estimate`` replays
+    surrogate = method == "is" and importance.proposal == "surrogate"
+    if method == "is":
+        config |= asdict(importance)
+    if surrogate:
+        config["pool_cache"] = str(pool_cache(store.path, fingerprint(setup.generator, setup.spec.name), seed).relative_to(store.path.parent))
+    name = campaign_name(method, selection.text, seed)
+    campaign = store.open_campaign(name, setup.spec.name, "margin", True, method, total, seed, config, True)
+    objective = Objective(setup.spec.name, selection.metrics[0], True)
+    outcomes = LatentObjective(objective, setup.env, setup.policy, setup.generator, setup.repeats, setup.params, keep_worlds=False)
+    with progress_bar(f"{method}: P({selection.describe()})", total=total, enabled=progress) as advance:
+        evaluate = StoredEvaluate(store, campaign, outcomes, partial(fr.score_worlds, selection), setup.backend, advance)
+        if not surrogate:
+            estimator = fr.monte_carlo if method == "mc" else partial(fr.importance_sampling, config=importance)
+            return estimator(evaluate, setup.generator.latent_dim, worlds, seed=seed, batch=fr.BATCH, target_width=target_width)
+        describe = cached_describer(store.path.parent / config["pool_cache"], distinct_describer(setup.spec, setup.generator, progress=progress))
+        timing = KeptTiming(timing_file(store.path, name))
+        return fr.importance_sampling(
+            evaluate, setup.generator.latent_dim, worlds, config=importance, seed=seed, batch=fr.BATCH, target_width=target_width,
+            describe=describe, timing=timing, say=say,
+        )  # fmt: skip

@@ -34,19 +34,21 @@ from worldagent.errors import WorldagentError
 RIDGE = 1.0  # on standardised features: shrinks what a pilot of a few hundred worlds cannot pin down
 
 
-def features(z: np.ndarray, described: np.ndarray | None = None) -> np.ndarray:
+def features(z: np.ndarray, described: np.ndarray | None = None, reference: int | None = None) -> np.ndarray:
     """f64[n, f]: [1, z, z², descriptors] of latents z f64[n, dim] and their worlds' descriptors f64[n, k] (or None).
 
-    The descriptors are standardised over the n rows given, and constant ones dropped: pass the
-    whole pool at once, so that every world is scaled alike.
+    The descriptors are standardised by the mean and spread of the first ``reference`` rows (None:
+    all n), and those constant there dropped: every world is scaled alike, and a pool described
+    in two parts (a timed sample first) is scaled as its sample was.
     """
     z = np.asarray(z, np.float64)
     columns = [np.ones((len(z), 1)), z, z**2]
     if described is not None and np.size(described):
         described = np.asarray(described, np.float64).reshape(len(z), -1)
-        spread = described.std(axis=0)
+        head = described[: len(z) if reference is None else reference]
+        spread = head.std(axis=0)
         varying = spread > 0
-        columns.append((described[:, varying] - described[:, varying].mean(axis=0)) / spread[varying])
+        columns.append((described[:, varying] - head[:, varying].mean(axis=0)) / spread[varying])
     return np.concatenate(columns, axis=1)
 
 
@@ -135,33 +137,47 @@ def distinct_describer(
     return describe
 
 
-def pool_file(store_path: Any, campaign: str) -> Path:
-    """Where a failure-rate campaign keeps its pool's descriptors: ``pools/<campaign>.npy`` beside ``store.sqlite``."""
-    return Path(store_path).parent / "pools" / f"{campaign}.npy"
+def pool_cache(store_path: Any, generator_fingerprint: str, seed: int) -> Path:
+    """Where a generator's pool descriptors for ``seed`` are kept: ``pools/<fingerprint>-s<seed>.npz`` beside ``store.sqlite``.
+
+    One file per generator and seed, whatever the event: the pool's latents are a prefix of one
+    stream per seed (``analysis.pooled``), so every event and every pool size reads it.
+    """
+    return Path(store_path).parent / "pools" / f"{generator_fingerprint}-s{int(seed)}.npz"
 
 
-def kept_describer(path: Any, describe: Callable[[np.ndarray], np.ndarray] | None) -> Callable[[np.ndarray], np.ndarray]:
-    """``describe`` whose answer is saved at ``path`` and read back on a rerun (the store replays an estimate with no
-    generator: ``describe`` None then, and a missing file is refused)."""
+def cached_describer(path: Any, describe: Callable[[np.ndarray], np.ndarray] | None) -> Callable[[np.ndarray], np.ndarray]:
+    """``describe`` that keeps the longest pool prefix it described at ``path`` (its latents and descriptors) and
+    describes only the rows past it; latents that differ from the kept ones are described afresh.
+
+    A replay with no generator passes ``describe`` None: rows it does not hold are then refused.
+    """
     from worldagent.files import write_atomically
 
     path = Path(path)
 
-    def save(described: np.ndarray, tmp: Path) -> None:
+    def save(z: np.ndarray, described: np.ndarray, tmp: Path) -> None:
         with open(tmp, "wb") as handle:
-            np.save(handle, described)
+            np.savez(handle, z=z, described=described)
 
     def kept(z: np.ndarray) -> np.ndarray:
+        z = np.asarray(z, np.float64)
+        held_z, held = np.zeros((0, z.shape[1])), None
         if path.exists():
-            described = np.load(path, allow_pickle=False)
-            if len(described) == len(z):
-                return described
+            with np.load(path, allow_pickle=False) as stored:
+                held_z, held = stored["z"], stored["described"]
+        shared = min(len(held_z), len(z))
+        if held is None or held_z.shape[1:] != z.shape[1:] or not np.array_equal(held_z[:shared], z[:shared]):
+            held_z, held, shared = z[:0], None, 0
+        if shared == len(z):
+            return held[: len(z)]
         if describe is None:
             raise WorldagentError(
                 f"{path} (the pool's descriptors) is missing or stale; rerun `worldagent failure-rate` with the estimate's settings."
             )
-        described = describe(z)
-        write_atomically(path, lambda tmp: save(described, tmp))
+        rest = np.asarray(describe(z[shared:]), np.float64).reshape(len(z) - shared, -1)
+        described = rest if held is None else np.concatenate([held[:shared], rest])
+        write_atomically(path, lambda tmp: save(z, described, tmp))
         return described
 
     return kept

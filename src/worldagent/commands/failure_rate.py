@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from worldagent.analysis.failure_rate import ImportanceConfig
+from worldagent.analysis.pooled import DEFAULT_POOL, MAX_POOL
 from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
@@ -14,6 +15,8 @@ from worldagent.commands.options import (
     backend,
     backend_flag,
     check_counts,
+    check_run_dir,
+    check_seed,
     env_argument,
     given_options,
     option_flag,
@@ -30,6 +33,7 @@ EVENT_HELP = (
 def estimate_line(estimate) -> str:
     """One line: the estimate, its interval, the worlds and episodes spent (and for IS the search's share and the ESS)."""
     name = {"mc": "Monte Carlo", "is": "importance sampling"}[estimate.method]
+    name = "importance sampling fell back to Monte Carlo" if estimate.fallback else name
     line = (
         f"{name}: P = {estimate.estimate:.3g}, {estimate.confidence:.0%} interval [{estimate.low:.3g}, {estimate.high:.3g}]; "
         f"{estimate.hits} hits in {estimate.worlds} worlds, {estimate.episodes} episodes"
@@ -37,6 +41,23 @@ def estimate_line(estimate) -> str:
     if estimate.method == "is":
         line += f" ({estimate.search_worlds} worlds learning the proposal); ESS {estimate.ess:.0f}, of the hits {estimate.event_ess:.0f}"
     return line
+
+
+def cost_lines(estimate) -> list[str]:
+    """What the estimate cost in wall time and, for the surrogate, what its pilot predicted; a cap's note."""
+    lines = [f"  {estimate.seconds:.1f} s wall time"]
+    plan = estimate.plan
+    if plan:
+        pool = f"a pool of {plan['pool']:,} worlds" + (f" ({plan['describe_total']:.0f} s to describe)" if plan["describe_total"] else "")
+        lines[0] += (
+            f"; the pilot predicted {plan['gain_episodes']:.2g}x fewer episodes than Monte Carlo and {plan['gain_seconds']:.2g}x less time,"
+            f" with {pool}"
+        )
+    if estimate.fallback:
+        lines.append(f"  fell back: {estimate.fallback}")
+    if estimate.note:
+        lines.append(f"  WARNING: {estimate.note}")
+    return lines
 
 
 def register(app: typer.Typer) -> None:
@@ -57,7 +78,14 @@ def register(app: typer.Typer) -> None:
             "--proposal",
             help="Importance sampling's proposal: surrogate (a model of the worlds' descriptors) or search (cross-entropy).",
         ),
-        pool: int = typer.Option(ImportanceConfig.pool, "--pool", help="Surrogate: prior worlds decoded and described (no episode) to draw from."),
+        pool: int = typer.Option(
+            None, "--pool", help="Surrogate: prior worlds decoded and described (no episode) to draw from (default: what --pool-seconds buys)."
+        ),
+        pool_seconds: float = typer.Option(
+            ImportanceConfig.pool_seconds,
+            "--pool-seconds",
+            help=f"Surrogate: time budget for describing the pool when --pool is not given (timed on a sample; at most {DEFAULT_POOL:,} worlds).",
+        ),
         pilot: int = typer.Option(ImportanceConfig.pilot, "--pilot", help="Surrogate: pool worlds evaluated to fit the model."),
         round_worlds: int = typer.Option(500, "--round-worlds", help="Search: worlds per round of the search for the proposal."),
         rounds: int = typer.Option(10, "--rounds", help="Search: rounds of the search at most."),
@@ -78,11 +106,16 @@ def register(app: typer.Typer) -> None:
         from worldagent.influence.selection import parse_selection
         from worldagent.store import RunStore
 
-        check_counts(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components, pool=pool, pilot=pilot)
-        importance = ImportanceConfig(round_worlds=round_worlds, max_rounds=rounds, components=components, proposal=proposal, pool=pool, pilot=pilot)
+        counts = dict(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components, pilot=pilot)
+        check_counts({"pool": MAX_POOL, "pilot": MAX_POOL}, **counts, **({} if pool is None else {"pool": pool}))
+        check_seed(seed)
+        importance = ImportanceConfig(
+            round_worlds=round_worlds, max_rounds=rounds, components=components, proposal=proposal, pool=pool, pilot=pilot, pool_seconds=pool_seconds
+        )
         methods(method)
         check_budget(worlds, width, importance)
         parse_selection(event, env)  # a bad event fails before the agent and generator load
+        check_run_dir(out)
         setup = experiments.setup(
             env,
             agent,
@@ -94,9 +127,11 @@ def register(app: typer.Typer) -> None:
             backend=backend(backend_name, ray_address),
         )
         with RunStore(out) as store:
+            say = lambda line: console.print(line, markup=False, highlight=False)  # noqa: E731
             found = experiments.failure_rate(
-                store, setup, event, method=method, worlds=worlds, importance=importance, target_width=width, seed=seed, progress=not quiet
+                store, setup, event, method=method, worlds=worlds, importance=importance, target_width=width, seed=seed, progress=not quiet, say=say
             )
         for estimate in found.values():
-            console.print(estimate_line(estimate), markup=False, highlight=False)
+            for line in (estimate_line(estimate), *cost_lines(estimate)):
+                console.print(line, markup=False, highlight=False)
         console.print(f"-> {out / 'store.sqlite'}", markup=False, highlight=False)

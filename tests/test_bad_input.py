@@ -150,12 +150,18 @@ def test_read_only_outputs_and_stores(read_only):
         assert f"cannot create files in {locked}" in line
     finally:
         locked.chmod(0o755)
+    writable = read_only.parent / "run"
+    with RunStore(writable):
+        pass
+    (writable / "store.sqlite").chmod(0o444)
+    line = one_line(runner.invoke(app, ["atlas", "racing", *HEAVY, "--out", str(writable)]))
+    assert "store.sqlite is read-only; make it writable" in line
     # a valid store in a read-only folder is named as such, not "not a worldagent run store"
     read_only.chmod(0o755)
     with RunStore(read_only):
         pass
     read_only.chmod(0o555)
-    with pytest.raises(WorldagentError, match="SQLite must write in"):
+    with pytest.raises(WorldagentError, match="SQLite writes the store and files beside it in .*; make both writable"):
         RunStore(read_only, create=False)
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import sqlite3
 import time
 from collections.abc import Iterator
@@ -138,8 +139,10 @@ class RunStore:
                 self._create()
             self._check()
         except sqlite3.DatabaseError as error:
-            if not can_create_files_in(path.parent):  # SQLite writes its -wal and -shm files beside the store
-                raise WorldagentError(f"cannot open {path} ({error}): SQLite must write in {path.parent}; make it writable or copy the run directory.") from None
+            if not (can_create_files_in(path.parent) and os.access(path, os.W_OK)):  # SQLite writes the store and its -wal, -shm beside it
+                raise WorldagentError(
+                    f"cannot open {path} ({error}): SQLite writes the store and files beside it in {path.parent}; make both writable or copy the run directory."
+                ) from None
             raise WorldagentError(f"{path} is not a worldagent run store ({error}); point at a store.sqlite written by worldagent.") from None
 
     def _tables(self) -> set[str]:

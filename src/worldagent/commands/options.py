@@ -7,6 +7,7 @@ environment registered by a plugin shows up in ``--help`` with no edit here.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import typer
@@ -144,7 +145,10 @@ def check_run_dir(out: Path) -> None:
     from worldagent.store import STORE_FILE, RunStore
 
     check_writable(out, folder=True)
-    if (Path(out) / STORE_FILE).exists():
+    store_file = Path(out) / STORE_FILE
+    if store_file.exists():
+        if not os.access(store_file, os.W_OK):  # SQLite would open it read-only and fail at the first write
+            raise WorldagentError(f"{store_file} is read-only; make it writable or choose another --out.")
         with RunStore(out, create=False) as store:
             store.check_intact()
 

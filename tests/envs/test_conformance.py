@@ -278,6 +278,10 @@ def test_repair_makes_dataset_cells_valid_worlds(case):
     for index in range(len(dataset)):
         case.env.check_world(jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[index]), repaired))
     assert_trees_equal(case.spec.repair(dataset, config)(logits), repaired)
+    from worldagent.worlds.generator import make_repair
+
+    with pytest.raises(WorldagentError):  # an unknown setting (generator train --repair) is refused, not ignored
+        make_repair(dataset, {"no_such_setting": 1})
 
 
 def test_declared_algorithms_pictures_and_presets(case):

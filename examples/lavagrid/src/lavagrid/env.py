@@ -6,12 +6,7 @@ episode's metrics, and pure jittable ``reset``/``step``.
 
 Actions: 0 up, 1 right, 2 down, 3 left; a move off the grid stays put. Reward (on the scale of
 ±1): ``goal_reward`` on reaching the goal and ``-lava_penalty`` on stepping into lava, each
-ending the episode, ``-step_penalty`` every step, and ``approach_reward`` per cell the move
-brings the agent closer to the goal (Manhattan; as much lost moving away). ``max_steps`` steps
-truncate it. The approach term is potential-based shaping (it sums to ``approach_reward`` times
-the distance closed, so it never rewards a detour): without it a new agent, which burns in 97%
-of its random episodes and reaches the goal in 1%, learns only to keep off the lava and wander
-until the time limit (PPO, 10,000 episodes).
+ending the episode, and ``-step_penalty`` every step; ``max_steps`` steps truncate it.
 
 Observation f32[2·V·V + 2], flat (PPO's networks take a 1-D observation): the lava and the
 off-grid cells in the V×V window around the agent, then the goal's offset from the agent
@@ -45,14 +40,12 @@ class LavaParams:
         goal_reward: reward for reaching the goal.
         lava_penalty: reward lost by stepping into lava.
         step_penalty: reward lost every step.
-        approach_reward: reward per cell of Manhattan distance to the goal closed by a move.
         max_steps: steps after which an episode is truncated (a far goal is 20 moves away).
     """
 
     goal_reward: float = 1.0
     lava_penalty: float = 1.0
     step_penalty: float = 0.01
-    approach_reward: float = 0.05
     max_steps: int = 60
 
 
@@ -124,13 +117,7 @@ class LavaGridEnv(Environment):
         position = jnp.where(inside, target, state.position)
         reached = state.world.goal[position[0], position[1]]
         burned = state.world.lava[position[0], position[1]]
-        closer = goal_distance(state.world, state.position) - goal_distance(state.world, position)
-        reward = (
-            jnp.where(reached, params.goal_reward, 0.0)
-            - jnp.where(burned, params.lava_penalty, 0.0)
-            - params.step_penalty
-            + params.approach_reward * closer
-        )
+        reward = jnp.where(reached, params.goal_reward, 0.0) - jnp.where(burned, params.lava_penalty, 0.0) - params.step_penalty
         time = state.time + 1
         terminated = reached | burned
         truncated = (time >= params.max_steps) & ~terminated
@@ -156,8 +143,3 @@ def goal_cell(world: LavaGrid) -> jax.Array:
     """i32[2]: the goal's (row, col) in one world."""
     goal = jnp.argmax(world.goal.ravel())
     return jnp.stack([goal // SIZE, goal % SIZE]).astype(jnp.int32)
-
-
-def goal_distance(world: LavaGrid, position: jax.Array) -> jax.Array:
-    """f32: Manhattan distance from ``position`` i32[2] to the goal."""
-    return jnp.sum(jnp.abs(goal_cell(world) - position)).astype(jnp.float32)

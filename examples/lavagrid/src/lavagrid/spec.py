@@ -55,10 +55,13 @@ def episode_note(metrics: dict) -> str:
 
 
 def training_check(means) -> str:
-    """ "" when a trained agent reaches the goal at all, else how it fails."""
-    if means.get("reached", 1.0) > 0.05:
+    """Why a trained agent failed to learn ("" if it reaches the goal in a quarter of its episodes or
+    more; PPO's reaches it in 60% of episodes on 1,000 G(z) worlds, uniformly random moves in 11%)."""
+    reached, burned = means.get("reached"), means.get("burned", 0.0)
+    if reached is None or reached >= 0.25:
         return ""
-    return "it burns in lava" if means.get("burned", 0.0) > 0.5 else "it wanders until the time limit"
+    how = "it burns in lava" if burned > 1.0 - reached - burned else "it wanders until the time limit"
+    return f"reaches the goal in only {reached:.0%} of its episodes ({how})"
 
 
 def lava_share(world) -> float:

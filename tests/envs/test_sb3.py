@@ -99,13 +99,13 @@ def test_sb3_refuses_next_step_autoreset_envs_with_the_fix():
 
 @pytest.mark.slow
 def test_sb3_ppo_learns_to_crash_less_on_the_vector_env_with_respawn(cache):
-    """SB3's PPO with its own defaults, 40,960 steps (about 25 s on 2 cores): its per-step reward rises from crashing every few steps."""
+    """SB3's PPO (its defaults but shorter rollouts), 40,960 steps (about 25 s on 2 cores): its reward per step rises as it stops crashing."""
     pytest.importorskip("stable_baselines3")
     import torch
     from stable_baselines3 import PPO
 
     torch.set_num_threads(1)
-    respawn = RacingParams(respawn=True)  # training-time respawn: without it SB3's PPO does not learn to drive
+    respawn = RacingParams(respawn=True)  # training-time respawn: every episode runs to the lap or the time limit
     model = PPO("MlpPolicy", to_sb3(make_envs(cache, 16, params=respawn)), n_steps=128, batch_size=256, seed=0, device="cpu")
 
     def reward_per_step() -> float:

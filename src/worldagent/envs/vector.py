@@ -28,8 +28,8 @@ over envs):
 
 Stable-Baselines3 takes its own ``VecEnv`` class, not Gymnasium's: ``to_sb3(envs)`` adapts one
 (``PPO("MlpPolicy", to_sb3(envs))``; ``envs/sb3.py``). Training-time respawn
-(``params=RacingParams(respawn=True)``) makes every episode last to the lap or the time limit;
-SB3's PPO with its own defaults learns to drive with it (``tests/envs/test_sb3.py``).
+(``params=RacingParams(respawn=True)``) makes every episode last to the lap or the time limit
+(``tests/envs/test_sb3.py`` trains SB3's PPO with it).
 
 Harvest has no vector env here: PettingZoo defines no vector API, and a Gymnasium
 ``VectorEnv`` needs one scalar reward per sub-env where Harvest gives one per agent (``[N, 4]``);

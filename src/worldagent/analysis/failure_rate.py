@@ -78,6 +78,12 @@ class Scored:
 
 Evaluate = Callable[[np.ndarray, np.ndarray], Scored]
 Say = Callable[[str], None]
+Prior = Callable[[np.random.Generator, int, int], np.ndarray]  # (rng, n, dim) -> z f64[n, dim]: the next n prior latents
+
+
+def standard_prior(rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
+    """z ~ N(0, I): the generator's prior. A stream's first n draws do not depend on how many follow (prefixes)."""
+    return rng.standard_normal((n, dim))
 
 
 @dataclass(frozen=True)
@@ -217,8 +223,9 @@ def score_worlds(selection: Any, worlds: Sequence) -> Scored:
 
 
 def monte_carlo(
-    evaluate: Evaluate, dim: int, worlds: int, *, seed: int = 0, batch: int = 1000, confidence: float = 0.95, target_width: float | None = None
-) -> Estimate:
+    evaluate: Evaluate, dim: int, worlds: int, *, seed: int = 0, batch: int = 1000, confidence: float = 0.95, target_width: float | None = None,
+    prior: Prior = standard_prior,
+) -> Estimate:  # fmt: skip
     """P(event) from worlds z ~ N(0, I), with an exact interval.
 
     With a fixed number of worlds the interval is Clopper–Pearson's. With ``target_width``,
@@ -236,6 +243,7 @@ def monte_carlo(
         batch: worlds per call of ``evaluate``.
         confidence: of the interval.
         target_width: stop at the hit that brings the interval within ±target_width · P.
+        prior: draws the latents (``standard_prior``; a benchmark replays recorded worlds with its own).
 
     Returns:
         An ``Estimate`` (estimate 0 and high = the interval's bound when no world is in the event).
@@ -245,13 +253,13 @@ def monte_carlo(
     """
     check_budget(worlds, target_width, dim=dim, batch=batch, confidence=confidence)
     started = time.perf_counter()
-    found = sample_prior(Spender(evaluate, seed), np.random.default_rng([seed, MC_STREAM]), dim, worlds, batch, confidence, target_width)
+    found = sample_prior(Spender(evaluate, seed), np.random.default_rng([seed, MC_STREAM]), dim, worlds, batch, confidence, target_width, prior=prior)
     return _timed(found, started)
 
 
 def sample_prior(
     spend: Spender, rng: np.random.Generator, dim: int, worlds: int, batch: int, confidence: float, target_width: float | None,
-    seen: np.ndarray | None = None,
+    seen: np.ndarray | None = None, prior: Prior = standard_prior,
 ) -> Estimate:  # fmt: skip
     """Monte Carlo's sampling (``monte_carlo``) with ``spend``; ``seen`` bool[m]: events of prior worlds already played
     (a pilot), counted first, as the stream's first m worlds."""
@@ -259,7 +267,7 @@ def sample_prior(
     needed = None if target_width is None else hits_for_width(target_width, confidence)
     events, total = [seen], len(seen)
     while total < worlds:
-        events.append(spend(rng.standard_normal((min(batch, worlds - total), dim))).event)
+        events.append(spend(prior(rng, min(batch, worlds - total), dim)).event)
         total += len(events[-1])
         hit_at = np.flatnonzero(np.concatenate(events))
         if needed is not None and len(hit_at) >= needed:
@@ -292,6 +300,7 @@ def importance_sampling(
     describe: Callable[[np.ndarray], np.ndarray] | None = None,
     timing: Mapping[str, float] | None = None,
     say: Say | None = None,
+    prior: Prior = standard_prior,
 ) -> Estimate:
     """P(event) by importance sampling: ``surrogate_sampling`` or the cross-entropy search's (``config.proposal``).
 
@@ -301,7 +310,7 @@ def importance_sampling(
         config: the sampler's settings.
         describe: ``(z f64[n, dim]) -> f64[n, k]`` descriptors of the worlds G(z), for the
             surrogate (None: it reads the latents only).
-        timing, say: the surrogate's (``surrogate_sampling``).
+        timing, say, prior: the surrogate's (``surrogate_sampling``; the search draws from N(0, I) itself).
 
     Returns:
         An ``Estimate``; ``worlds``, ``episodes`` include the search's or pilot's (``search_worlds``).
@@ -314,7 +323,7 @@ def importance_sampling(
     if config.proposal == "surrogate":
         found = surrogate_sampling(
             evaluate, dim, worlds, config=config, seed=seed, batch=batch, confidence=confidence, target_width=target_width,
-            describe=describe, timing=timing, say=say,
+            describe=describe, timing=timing, say=say, prior=prior,
         )  # fmt: skip
     else:
         from worldagent.analysis.cross_entropy import search_sampling
@@ -336,6 +345,7 @@ def surrogate_sampling(
     describe: Callable[[np.ndarray], np.ndarray] | None = None,
     timing: Mapping[str, float] | None = None,
     say: Say | None = None,
+    prior: Prior = standard_prior,
 ) -> Estimate:
     """P(event) from a pool of prior worlds stratified by a surrogate of their descriptors (``analysis.pooled``).
 
@@ -349,12 +359,13 @@ def surrogate_sampling(
         timing: {"episode_seconds", "describe_seconds"} per world, to replay a recorded plan
             (``Estimate.plan``) instead of measuring: a replayed pilot costs no time.
         say: called with one line before the pool is described, or when falling back.
+        prior: draws the pool's latents and the fallback's (``standard_prior``).
     """
     say = say or (lambda line: None)
     pool_rng = np.random.default_rng([seed, IS_STREAM, POOL_LATENTS])
     spend = Spender(evaluate, seed)
     sample = max(config.pilot + 1, min(pooled.TIMED_SAMPLE, config.pool or pooled.TIMED_SAMPLE))
-    pool = pool_rng.standard_normal((sample, dim))
+    pool = prior(pool_rng, sample, dim)
     play, describing = pooled.Clock(), pooled.Clock()
     pilot = [
         play.timed(spend, min(batch, config.pilot - start))(pool[start : min(start + batch, config.pilot)]) for start in range(0, config.pilot, batch)
@@ -368,14 +379,14 @@ def surrogate_sampling(
     if plan.fallback:
         say(f"{plan.fallback}: Monte Carlo instead, starting from the pilot's {config.pilot:,} prior worlds.")
         rng = np.random.default_rng([seed, IS_STREAM, FALLBACK_DRAWS])
-        found = sample_prior(spend, rng, dim, config.pilot + worlds, batch, confidence, target_width, seen)
+        found = sample_prior(spend, rng, dim, config.pilot + worlds, batch, confidence, target_width, seen, prior)
         return Estimate(**{**asdict(found), "search_worlds": 0, "fallback": plan.fallback, "plan": plan.as_dict()})
     if size > sample:
         minutes = plan.describe_total / 60
         say(
             f"describing the pool: {size:,} worlds, about {minutes:.1f} min ({timing['describe_seconds'] * 1e3:.2f} ms a world, timed on {sample:,})."
         )
-        pool = np.concatenate([pool, pool_rng.standard_normal((size - sample, dim))])
+        pool = np.concatenate([pool, prior(pool_rng, size - sample, dim)])
         described = None if describe is None else describe(pool)
     strata = pooled.stratify(pooled.pool_chances(pool, described, sample, margins))
     counts = pooled.draws_per_stratum(plan.draws, pooled.allocation(strata))

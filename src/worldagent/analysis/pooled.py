@@ -199,7 +199,7 @@ def plan(
     spent = (pilot + draws) * episode_seconds + describe_total
     gain_seconds = mc * episode_seconds / spent if spent > 0 else gain_episodes
     fallback = None
-    if not width <= 1:
+    if MIN_GAIN > 0 and not width <= 1:
         fallback = f"the pilot's model cannot place the event (±{width:.0%} predicted after {draws:,} draws)"
     elif min(gain_episodes, gain_seconds) < MIN_GAIN:
         what = "in episodes" if gain_episodes < MIN_GAIN else "in seconds, describing the pool included"

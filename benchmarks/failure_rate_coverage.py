@@ -1,0 +1,334 @@
+"""Failure probability with trained agents: do the estimators' intervals hold, and what do they gain (issue 29)?
+
+    python benchmarks/failure_rate_coverage.py record --run runs/quick --env racing      # brute force, cached under runs/
+    python benchmarks/failure_rate_coverage.py study  --run runs/quick --env racing      # replay the estimators
+
+1. **Record** (once per agent): ``--worlds`` worlds z ~ N(0, I) from their own stream, each played
+   ``--repeats`` episodes as ``worldagent failure-rate`` plays them (the campaign's keys), and the
+   pool's descriptors of every world (timed). Per-world metric means, per-episode returns and
+   the seconds each part took go to ``runs/frcoverage/<env>-<agent>-<generator>.npz``, written
+   chunk by chunk so a killed run resumes.
+2. **Study** (offline, no episode): the recorded worlds are the population. Each estimator seed
+   draws its pool and its worlds from them with replacement and reads their recorded outcomes,
+   so 20+ seeds per estimator cost no new episode. Events are thresholds on the return at the
+   brute force's 1e-2 and 1e-3 quantiles; the truth is the recorded fraction. Per proposal:
+   coverage, bias (mean estimate / truth), the median episodes-ratio at equal width, and the wall
+   time each run would have taken (episodes at the recorded seconds per world, plus describing
+   its pool). Writes ``benchmarks/results/failure-rate-coverage.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from failure_rate import generator_hash  # noqa: E402
+from machine import RESULTS, describe_machine  # noqa: E402
+from worldagent import experiments  # noqa: E402
+from worldagent.evaluation.local import evaluate  # noqa: E402
+
+CHUNK = 2000  # worlds per recorded chunk (a killed record resumes at its last chunk)
+CACHE = Path("runs/frcoverage")
+AGENTS = {  # what the quick preset leaves per env (reproduce/layout.py): the agent dir and its generator
+    "racing": {"agent": "agent", "generator": "generator"},
+    "harvest": {"agent": "agent", "generator": "generator"},
+}
+
+
+def load_setup(run: Path, env: str, agent: str | None, repeats: int):
+    """The experiment's setup from a reproduce run directory (its trained agent and generator, or ``agent``)."""
+    where = run / env
+    return experiments.setup(env, agent or str(where / AGENTS[env]["agent"]), str(where / AGENTS[env]["generator"]), repeats=repeats)
+
+
+def episode_metrics(setup):
+    """``(z f64[n, dim], seeds int[n]) -> {metric: f64[n, repeats]}`` as a failure-rate campaign plays them."""
+    generate = jax.jit(lambda generator, z: generator(z))
+    world_keys = jax.jit(jax.vmap(lambda seed: jax.random.split(jax.random.key(seed), setup.repeats)))
+
+    def play(z: np.ndarray, seeds: np.ndarray) -> dict:
+        worlds = generate(setup.generator, jnp.asarray(z, jnp.float32))
+        keys = world_keys(jnp.asarray(seeds, jnp.uint32))
+        metrics = setup.spec.metrics.with_derived(
+            evaluate(setup.env, setup.policy, worlds, setup.repeats, None, setup.params, keys=keys), setup.params
+        )
+        return {name: np.asarray(value, np.float64) for name, value in metrics.items() if np.ndim(value) == 2}
+
+    return play
+
+
+def record_path(env: str, agent_name: str, setup) -> Path:
+    return CACHE / f"{env}-{agent_name}-{generator_hash(setup.generator)}.npz"
+
+
+def record(args) -> None:
+    """The brute force: chunk files under ``<cache>.parts/``, merged into the .npz when all are there."""
+    from worldagent.analysis.surrogate import distinct_describer
+
+    setup = load_setup(args.run, args.env, args.agent, args.repeats)
+    path = record_path(args.env, args.name, setup)
+    parts = path.with_suffix(".parts")
+    parts.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng([args.seed, 99])
+    z_all = rng.standard_normal((args.worlds, setup.generator.latent_dim))
+    seeds_all = rng.integers(0, 2**31, args.worlds)
+    play = episode_metrics(setup)
+    started = time.time()
+    for first in range(0, args.worlds, CHUNK):
+        part = parts / f"{first:08d}.npz"
+        if part.exists():
+            continue
+        z, seeds = z_all[first : first + CHUNK], seeds_all[first : first + CHUNK]
+        began = time.perf_counter()
+        metrics = play(z, seeds)
+        seconds = time.perf_counter() - began
+        np.savez(part, seconds=seconds, **{f"m_{name}": value.astype(np.float32) for name, value in metrics.items()})
+        done = first + len(z)
+        rate = done / max(time.time() - started, 1e-9)
+        print(f"{time.strftime('%H:%M:%S')} {done}/{args.worlds} worlds, {len(z) / seconds:.0f} worlds/s this chunk, {rate:.0f} overall", flush=True)
+    chunks = [np.load(parts / f"{first:08d}.npz") for first in range(0, args.worlds, CHUNK)]
+    names = [key[2:] for key in chunks[0].files if key.startswith("m_")]
+    metrics = {name: np.concatenate([c[f"m_{name}"] for c in chunks]) for name in names}
+    episode_seconds = float(sum(float(c["seconds"]) for c in chunks))
+    print(f"describing {args.worlds} worlds", flush=True)
+    began = time.perf_counter()
+    described = distinct_describer(setup.spec, setup.generator)(z_all)
+    describe_seconds = time.perf_counter() - began
+    np.savez(
+        path,
+        z=z_all.astype(np.float32),
+        seeds=seeds_all,
+        described=described,
+        descriptor_names=np.array(list(setup.spec.metrics.descriptors)),
+        episode_seconds=episode_seconds,
+        describe_seconds=describe_seconds,
+        repeats=setup.repeats,
+        **{f"m_{name}": value for name, value in metrics.items()},
+    )
+    print(f"-> {path}: {args.worlds} worlds, episodes {episode_seconds:.0f} s, describing {describe_seconds:.0f} s", flush=True)
+
+
+# -- the study: the estimators replayed on the recorded worlds --------------------------------------
+
+PROBABILITIES = (1e-2, 1e-3)
+WIDTH = 0.5
+
+
+def load_record(path: Path, setup=None) -> dict:
+    """The recorded worlds: the merged .npz, or (a record still running) its finished chunks, described here (timed)."""
+    if path.exists():
+        with np.load(path, allow_pickle=False) as kept:
+            return {key: kept[key] for key in kept.files} | {"complete": True}
+    from worldagent.analysis.surrogate import distinct_describer
+
+    parts = path.with_suffix(".parts")
+    chunks = sorted(parts.glob("*.npz"))
+    worlds = len(chunks) * CHUNK
+    rng = np.random.default_rng([0, 99])
+    z = rng.standard_normal((216_000, setup.generator.latent_dim))[:worlds]
+    loaded = [np.load(c) for c in chunks]
+    record = {"z": z.astype(np.float32), "episode_seconds": sum(float(c["seconds"]) for c in loaded), "complete": False}
+    record |= {key: np.concatenate([c[key] for c in loaded]) for key in loaded[0].files if key.startswith("m_")}
+    described_path = path.with_name(path.stem + f"-described-{worlds}.npz")
+    if not described_path.exists():
+        began = time.perf_counter()
+        described = distinct_describer(setup.spec, setup.generator)(z)
+        np.savez(described_path, described=described, seconds=time.perf_counter() - began)
+    with np.load(described_path) as kept:
+        record |= {"described": kept["described"], "describe_seconds": float(kept["seconds"])}
+    return record
+
+
+class Population:
+    """The recorded worlds as a prior: ``prior(rng, n, dim)`` draws n of them with replacement, ``evaluate`` reads
+    their recorded per-world means (no episode)."""
+
+    def __init__(self, z: np.ndarray, values: np.ndarray, described: np.ndarray, repeats: int):
+        self.z, self.values, self.described, self.repeats = np.asarray(z, np.float64), values, described, repeats
+        self.row = {}
+
+    def prior(self, rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
+        picked = rng.integers(0, len(self.z), n)
+        z = self.z[picked]
+        self.row.update(zip(map(bytes, z), picked))
+        return z
+
+    def rows(self, z: np.ndarray) -> np.ndarray:
+        return np.array([self.row[bytes(row)] for row in np.asarray(z, np.float64)])
+
+    def scorer(self, selection, metric: str):
+        from worldagent.analysis import failure_rate as fr
+
+        def evaluate(z, seeds):
+            return fr.score_means(selection, {metric: self.values[self.rows(z)]}, len(z) * self.repeats)
+
+        return evaluate
+
+    def describe(self, z: np.ndarray) -> np.ndarray:
+        return self.described[self.rows(z)]
+
+
+def legacy_mixture(evaluate, population: Population, dim: int, worlds: int, seed: int, target_width, pool: int, pilot: int = 500):
+    """The pooled sampler before issue 29 (commit f764576): q = α/M + (1 − α) chance / Σ chance, α = 0.1, batches of
+    1,000 with replacement, the normal interval plus the pool's variance, stopped at the first batch (of 2 or more)
+    whose interval is within the width with 10 hits. Returns (estimate, low, high, worlds)."""
+    from worldagent.analysis import surrogate
+    from worldagent.analysis.intervals import weighted_interval
+
+    rng = np.random.default_rng([seed, 3])
+    z = population.prior(rng, pool, dim)
+    margins = evaluate(z[:pilot], None).margin
+    features = surrogate.features(z, population.describe(z))
+    shares = surrogate.pool_shares(surrogate.log_chances(features, features[:pilot], margins), 0.1)
+    weight_of = 1.0 / (pool * shares)
+    weights, events = [], []
+    while sum(map(len, events)) < worlds:
+        drawn = rng.choice(pool, size=min(1000, worlds - sum(map(len, events))), p=shares)
+        events.append(evaluate(z[drawn], None).event)
+        weights.append(weight_of[drawn])
+        terms = np.concatenate(weights) * np.concatenate(events)
+        mean, low, high = weighted_interval(terms, 0.95, pool)
+        hits = int(np.concatenate(events).sum())
+        if target_width and len(events) >= 2 and hits >= 10 and mean > 0 and (high - low) / (2 * mean) <= target_width:
+            break
+    return mean, low, high, pilot + sum(map(len, events))
+
+
+def replay(args) -> None:
+    """Every estimator on every event, ``--seeds`` times each, against the recorded worlds (module docstring)."""
+    from failure_rate import threshold_for
+    from worldagent.analysis import failure_rate as fr
+    from worldagent.analysis import pooled
+    from worldagent.analysis.pooled import monte_carlo_worlds
+    from worldagent.influence.selection import parse_selection
+
+    setup = load_setup(args.run, args.env, args.agent, args.repeats)
+    record = load_record(record_path(args.env, args.name, setup), setup)
+    values = record[f"m_{args.metric}"].mean(axis=1) if record[f"m_{args.metric}"].ndim == 2 else record[f"m_{args.metric}"]
+    worlds = len(values)
+    population = Population(record["z"], values, record["described"], setup.repeats)
+    episode_seconds, describe_seconds = record["episode_seconds"] / worlds, float(record["describe_seconds"]) / worlds
+    timing = {"episode_seconds": episode_seconds, "describe_seconds": describe_seconds}
+    dim = population.z.shape[1]
+    print(f"{worlds} recorded worlds; {episode_seconds * 1e3:.2f} ms of episodes and {describe_seconds * 1e3:.3f} ms describing a world", flush=True)
+    events = []
+    for p in PROBABILITIES:
+        threshold = threshold_for(values, p, "<")
+        selection = parse_selection(f"{args.metric} < {threshold!r}", args.env)
+        truth = float(np.mean(selection.clauses[0].holds(values)))
+        evaluate = population.scorer(selection, args.metric)
+        runs = {}
+        for label, width, cap in (("width 0.5", WIDTH, 400_000), ("--worlds 10000", None, 10_000)):
+            for proposal in args.proposals:
+                rows = []
+                for seed in range(args.seeds):
+                    began = time.perf_counter()
+                    rows.append(run_one(proposal, evaluate, population, dim, cap, seed, width, timing, fr, pooled))
+                    rows[-1]["replay_seconds"] = time.perf_counter() - began
+                runs[f"{proposal}, {label}"] = summarise(rows, truth, timing, setup.repeats, monte_carlo_worlds)
+                print(f"{args.env} P={truth:.3g} {proposal}, {label}: {json.dumps(runs[f'{proposal}, {label}']['summary'])}", flush=True)
+        events.append({"target_probability": p, "event": selection.text, "truth": truth, "hits": int(round(truth * worlds)), "runs": runs})
+    payload = {
+        "benchmark": "failure_rate_coverage",
+        "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "machine": describe_machine(),
+        "command": " ".join(sys.argv),
+        "agent": {"env": args.env, "name": args.name, "run": str(args.run), "repeats": setup.repeats},
+        "recorded_worlds": worlds,
+        "record_complete": bool(record["complete"]),
+        "episode_seconds_per_world": episode_seconds,
+        "describe_seconds_per_world": describe_seconds,
+        "settings": {"seeds": args.seeds, "width": WIDTH, "proposals": args.proposals, "defensive": pooled.DEFENSIVE, "min_gain": pooled.MIN_GAIN},
+        "events": events,
+    }
+    path = RESULTS / "failure-rate-coverage.json"
+    kept = json.loads(path.read_text()) if path.exists() else {}
+    kept = {key: value for key, value in kept.items() if key != f"{args.env}-{args.name}"} | {f"{args.env}-{args.name}": payload}
+    path.write_text(json.dumps(kept, indent=1) + "\n")
+    print("->", path, flush=True)
+
+
+def run_one(proposal: str, evaluate, population, dim: int, cap: int, seed: int, width, timing: dict, fr, pooled) -> dict:
+    """One estimate: {estimate, low, high, worlds, pool, fallback}."""
+    if proposal == "mc":
+        e = fr.monte_carlo(evaluate, dim, cap, seed=seed, target_width=width, prior=population.prior)
+        return {"estimate": e.estimate, "low": e.low, "high": e.high, "worlds": e.worlds, "pool": 0, "fallback": None}
+    if proposal == "mixture (before)":
+        pool = pooled.DEFAULT_POOL
+        estimate, low, high, worlds = legacy_mixture(evaluate, population, dim, min(cap, 50_000), seed, width, pool)
+        return {"estimate": estimate, "low": low, "high": high, "worlds": worlds, "pool": pool, "fallback": None}
+    flags = {"UNSEEN": "unseen" in proposal, "MIN_GAIN": 0.0 if "forced" in proposal else pooled.MIN_GAIN}
+    kept = {name: getattr(pooled, name) for name in flags}
+    try:
+        for name, value in flags.items():
+            setattr(pooled, name, value)
+        e = fr.importance_sampling(
+            evaluate, dim, min(cap, 50_000), seed=seed, target_width=width, describe=population.describe, timing=timing, prior=population.prior
+        )
+    finally:
+        for name, value in kept.items():
+            setattr(pooled, name, value)
+    pool = e.plan["pool"] if e.plan and not e.fallback else 0
+    return {"estimate": e.estimate, "low": e.low, "high": e.high, "worlds": e.worlds, "pool": pool, "fallback": e.fallback}
+
+
+def summarise(rows: list[dict], truth: float, timing: dict, repeats: int, monte_carlo_worlds) -> dict:
+    """Coverage, bias, widths, and the episodes- and seconds-ratio over Monte Carlo at each run's own width (medians);
+    seconds are the recorded per-world costs: episodes, and describing the pool where one was described."""
+    episode_seconds, describe = timing["episode_seconds"], timing["describe_seconds"]
+    width = np.array([(r["high"] - r["low"]) / (2 * r["estimate"]) if r["estimate"] > 0 else np.inf for r in rows])
+    worlds = np.array([r["worlds"] for r in rows], float)
+    mc = np.array([monte_carlo_worlds(truth, w) if np.isfinite(w) else np.nan for w in width])
+    seconds = worlds * episode_seconds + np.array([r["pool"] for r in rows]) * describe
+    return {
+        "summary": {
+            "coverage": float(np.mean([r["low"] <= truth <= r["high"] for r in rows])),
+            "bias": float(np.mean([r["estimate"] for r in rows]) / truth),
+            "median_width": float(np.median(width)),
+            "median_episodes": float(np.median(worlds) * repeats),
+            "median_episode_ratio_at_equal_width": float(np.nanmedian(mc / worlds)),
+            "fallbacks": int(sum(r["fallback"] is not None for r in rows)),
+            "median_wall_seconds": float(np.median(seconds)),
+            "median_seconds_ratio_at_equal_width": float(np.nanmedian(mc * episode_seconds / seconds)),
+        },
+        "runs": rows,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    rec = sub.add_parser("record", help="the brute force of one agent (cached)")
+    rec.add_argument("--run", type=Path, default=Path("runs/quick"))
+    rec.add_argument("--env", default="racing")
+    rec.add_argument("--agent", default=None, help="another agent than the run's trained one")
+    rec.add_argument("--name", default="ppo", help="the agent's name in the cache file")
+    rec.add_argument("--worlds", type=int, default=216_000)
+    rec.add_argument("--repeats", type=int, default=8)
+    rec.add_argument("--seed", type=int, default=0)
+    study = sub.add_parser("study", help="replay the estimators on a recorded brute force")
+    study.add_argument("--run", type=Path, default=Path("runs/quick"))
+    study.add_argument("--env", default="racing")
+    study.add_argument("--agent", default=None)
+    study.add_argument("--name", default="ppo")
+    study.add_argument("--repeats", type=int, default=8)
+    study.add_argument("--metric", default="return")
+    study.add_argument("--seeds", type=int, default=20)
+    study.add_argument("--proposals", nargs="+", default=["mc", "stratified", "stratified, unseen", "mixture (before)"])
+    args = parser.parse_args()
+    if args.command == "record":
+        record(args)
+    else:
+        replay(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -15,7 +15,7 @@ from worldagent.envs.harvest import Harvest, generate_maps, make_params
 from worldagent.envs.racing.env import ParticleRacing
 from worldagent.envs.racing.tracks import generate_tracks
 from worldagent.errors import WorldagentError
-from worldagent.evaluation.local import episode_keys, evaluate, summarise
+from worldagent.evaluation.local import episode_keys, episodes_per_call, evaluate, summarise
 
 RACING = ParticleRacing()
 
@@ -63,7 +63,8 @@ def test_an_external_agent_goes_to_the_host_evaluator_with_the_same_output(world
     jitted = evaluate(RACING, always_north, worlds, 2, jax.random.key(0))
     calls = []
     host = evaluate(RACING, HostPolicy(lambda obs: calls.append(obs.shape) or np.full(len(obs), 2), RACING.num_actions), worlds, 2, jax.random.key(0))
-    assert calls[0] == (12, *RACING.observation_shape)  # one call per step for all 6 worlds x 2 repeats
+    # one call per step for all 6 worlds x 2 repeats, padded to the evaluator's one batch size
+    assert calls[0] == (episodes_per_call(), *RACING.observation_shape)
     assert set(host) == set(jitted)
     for name in jitted:
         np.testing.assert_array_equal(host[name], jitted[name])

@@ -1,14 +1,16 @@
 """The batched host evaluator: external agents on many worlds at once (DESIGN.md "Evaluator").
 
 An external agent (``agents.external.HostPolicy``: a Python callable, ONNX or Stable-Baselines3
-model) cannot run inside ``jit``. Here the jitted env steps all B worlds × R repeats in
-lockstep, and the agent is called from Python once per step on the whole batch of observations
-``[B·R, ...]``. Keys follow ``local.run_episode`` split for split (reset and steps from each
+model) cannot run inside ``jit``. Here the jitted env steps E episodes in lockstep (each on its
+own world; ``local.play_episodes`` always passes the same E, so the agent always sees batches
+of one size), and the agent is called from Python once per step on the whole batch of
+observations ``[E, ...]``. Keys follow ``local.run_episode`` split for split (reset and steps from each
 episode key, then ``(next, act, env)`` at every step), and a finished episode is frozen as under
 ``vmap(while_loop)``, so a jitted policy computing the same function gives the same metrics.
 
-``evaluate_host(env, policy, worlds[B], keys[B, R], params, num_steps) -> {metric: [B, R, ...]}``;
-``replay_host`` keeps the agents' positions, as ``trajectories.replay`` does for jitted policies.
+``evaluate_host(env, policy, worlds[E], keys[E], params, num_steps) -> {metric: [E, ...]}``;
+``host_rollouts`` with a ``trace`` keeps the agents' positions, as ``trajectories.replay`` does
+for jitted policies.
 """
 
 from __future__ import annotations
@@ -25,8 +27,8 @@ from worldagent.envs.core import Environment
 
 @functools.lru_cache(maxsize=16)
 def _compiled(env: Environment, trace: Any = None):
-    """Jitted ``start(worlds[B], keys[B, R], params)``, ``step(state, obs, keys3, actions, done, params)``,
-    ``metrics(states[B, R])`` and (with ``trace``) ``where(states[B, R])``."""
+    """Jitted ``start(worlds[E], keys[E], params)``, ``step(state, obs, keys3, actions, done, params)``,
+    ``metrics(states[E])`` and (with ``trace``) ``where(states[E])``."""
 
     def start_one(world, key, params):
         key_reset, key_steps = jax.random.split(key)
@@ -42,33 +44,30 @@ def _compiled(env: Environment, trace: Any = None):
         keys_next = keep(jax.random.split(keys3[0], 3), keys3)
         return obs_next, state_next, keys_next, jnp.logical_or(done, ended)
 
-    over_repeats = lambda f, axes: jax.vmap(jax.vmap(f, in_axes=axes), in_axes=axes)  # noqa: E731
-    start = jax.jit(jax.vmap(jax.vmap(start_one, in_axes=(None, 0, None)), in_axes=(0, 0, None)))
-    step = jax.jit(over_repeats(step_one, (0, 0, 0, 0, 0, None)))
-    metrics = jax.jit(jax.vmap(jax.vmap(env.metrics)))
-    where = jax.jit(jax.vmap(jax.vmap(trace))) if trace is not None else None
+    start = jax.jit(jax.vmap(start_one, in_axes=(0, 0, None)))
+    step = jax.jit(jax.vmap(step_one, in_axes=(0, 0, 0, 0, 0, None)))
+    metrics = jax.jit(jax.vmap(env.metrics))
+    where = jax.jit(jax.vmap(trace)) if trace is not None else None
     return start, step, metrics, where
 
 
 def host_rollouts(env: Environment, policy, worlds: Any, keys: jax.Array, params: Any, num_steps: int, trace: Any = None):
-    """Play ``keys[B, R]`` episodes on ``worlds[B]`` with a host policy, all in lockstep.
+    """Play episodes ``keys[E]`` on ``worlds[E]`` (episode e on world e) with a host policy, in lockstep.
 
     Returns:
-        ({metric: [B, R, ...]} of the episodes' ends, steps taken i32[B, R], and with ``trace``
-        the agents' positions and presence at the start and after every step,
-        ``[B, R, num_steps + 1, ...]``, else None).
+        ({metric: [E, ...]} of the episodes' ends, steps taken i32[E], and with ``trace`` the
+        agents' positions and presence at the start and after every step, ``[E, num_steps + 1, ...]``,
+        else None).
     """
     start, step, metrics, where = _compiled(env, trace)
     obs, state, keys3 = start(worlds, keys, params)
-    batch, repeats = keys.shape[:2]
-    done = jnp.zeros((batch, repeats), bool)
-    steps = np.zeros((batch, repeats), np.int32)
+    done = jnp.zeros(len(keys), bool)
+    steps = np.zeros(len(keys), np.int32)
     trail = [where(state)] if where is not None else None
     for _ in range(num_steps):
-        flat_obs = np.asarray(obs).reshape(batch * repeats, *obs.shape[2:])
-        actions = policy(flat_obs, keys3[:, :, 1].reshape(-1))
+        actions = policy(np.asarray(obs), keys3[:, 1])
         was_done = np.asarray(done)
-        obs, state, keys3, done = step(state, obs, keys3, jnp.asarray(actions.reshape(batch, repeats, *actions.shape[1:])), done, params)
+        obs, state, keys3, done = step(state, obs, keys3, jnp.asarray(actions), done, params)
         steps += ~was_done
         if trail is not None:
             trail.append(where(state))
@@ -79,10 +78,10 @@ def host_rollouts(env: Environment, policy, worlds: Any, keys: jax.Array, params
         return ends, steps, None
     # episodes that all ended early: positions after the end repeat the last ones, as in a replay
     trail += [trail[-1]] * (num_steps + 1 - len(trail))
-    positions = jax.tree_util.tree_map(lambda *frames: np.stack([np.asarray(f) for f in frames], axis=2), *trail)
+    positions = jax.tree_util.tree_map(lambda *frames: np.stack([np.asarray(f) for f in frames], axis=1), *trail)
     return ends, steps, positions
 
 
 def evaluate_host(env: Environment, policy, worlds: Any, keys: jax.Array, params: Any, num_steps: int) -> dict[str, np.ndarray]:
-    """{metric: [B, R, ...]} of a host policy's episodes ``keys[B, R]`` on ``worlds[B]`` (``local.evaluate``'s output)."""
+    """{metric: [E, ...]} of a host policy's episodes ``keys[E]`` on ``worlds[E]`` (``local.play_episodes``'s output)."""
     return host_rollouts(env, policy, worlds, keys, params, num_steps)[0]

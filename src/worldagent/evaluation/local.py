@@ -1,11 +1,20 @@
 """Evaluate agents on many worlds at once (DESIGN.md "Evaluator"; paper §4.4, §5.2.2).
 
 ``evaluate(env, policy, worlds[B], repeats, key) -> metrics``: every metric of the env's
-episodes as an array ``[B, repeats]`` (or ``[B, repeats, N]`` for per-agent metrics), from one
-jitted ``vmap(vmap(while_loop))`` over worlds × repeats × steps. An episode's loop stops when
-it ends; under ``vmap`` the batch runs until its last episode ends, the finished ones frozen.
-Nothing per step is stored: the metrics accumulate in the env state. With several local
-devices (a host with 8 GPUs) each batch of worlds is sharded over all of them.
+episodes as an array ``[B, repeats]`` (or ``[B, repeats, N]`` for per-agent metrics), from a
+jitted ``vmap(while_loop)`` over episodes × steps. An episode's loop stops when it ends; under
+``vmap`` the batch runs until its last episode ends, the finished ones frozen. Nothing per step
+is stored: the metrics accumulate in the env state. With several local devices (a host with 8
+GPUs) each call is sharded over all of them.
+
+**Batch invariance.** Every compiled call plays exactly ``episodes_per_call()`` episodes per
+device, each with its own world and key (the last episode repeated as padding). XLA fuses a
+program differently for different shapes, and on CPU a multiply-add fused into an FMA in one
+program but not in another changes the last bit of, say, racing's lap fraction; a near-tie in
+an agent's action then sends the episode elsewhere. One shape for every call means one
+program, so an episode's metrics depend only on its world, key and agent: never on how many
+worlds came with it, how a backend split them, or how many devices ran them. The same holds
+for external agents, whose own matrix products may also depend on the batch they get.
 
 External agents (``agents.external.HostPolicy``, ``host = True``) go to the batched host
 evaluator (``evaluation/host.py``) with the same keys and the same output.
@@ -14,6 +23,8 @@ evaluator (``evaluation/host.py``) with the same keys and the same output.
 from __future__ import annotations
 
 import functools
+import os
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -24,7 +35,10 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from worldagent.envs.core import Environment
 from worldagent.errors import WorldagentError
 
-MAX_BATCH = 1024  # worlds per compiled call (bounds device memory; results are concatenated)
+# Episodes each compiled call plays per device. On 2 CPU cores 256 is as fast per episode as
+# 1,024 and pads a CMA-ES generation (21 worlds x 8) less; accelerators want far more at once.
+EPISODES_PER_CALL = {"cpu": 256}
+ACCELERATOR_EPISODES_PER_CALL = 4096
 
 
 def run_episode(env: Environment, policy, key: jax.Array, world: Any, params: Any, num_steps: int) -> dict[str, jax.Array]:
@@ -51,12 +65,9 @@ def run_episode(env: Environment, policy, key: jax.Array, world: Any, params: An
 
 @functools.lru_cache(maxsize=32)
 def _compiled(env: Environment, num_steps: int):
-    """Jitted ``(policy, worlds, keys[B, R], params) -> metrics[B, R, ...]`` for one env."""
-
-    def per_world(policy, world, keys, params):
-        return jax.vmap(lambda key: run_episode(env, policy, key, world, params, num_steps))(keys)
-
-    return jax.jit(jax.vmap(per_world, in_axes=(None, 0, 0, None)))
+    """Jitted ``(policy, worlds[E], keys[E], params) -> metrics[E, ...]``: episode e on world e."""
+    episode = lambda policy, world, key, params: run_episode(env, policy, key, world, params, num_steps)  # noqa: E731
+    return jax.jit(jax.vmap(episode, in_axes=(None, 0, 0, None)))
 
 
 def episode_keys(key: jax.Array, worlds: int, repeats: int) -> jax.Array:
@@ -64,17 +75,33 @@ def episode_keys(key: jax.Array, worlds: int, repeats: int) -> jax.Array:
     return jax.random.split(key, (worlds, repeats))
 
 
+def episodes_per_call() -> int:
+    """Episodes one compiled call plays on each device (``WORLDAGENT_EPISODES_PER_CALL`` overrides)."""
+    given = os.environ.get("WORLDAGENT_EPISODES_PER_CALL")
+    if given:
+        if not given.isdigit() or int(given) < 1:
+            raise WorldagentError(f"WORLDAGENT_EPISODES_PER_CALL={given!r}; set it to a positive whole number, or unset it.")
+        return int(given)
+    return EPISODES_PER_CALL.get(jax.default_backend(), ACCELERATOR_EPISODES_PER_CALL)
+
+
+def episode_calls(total: int) -> list[tuple[int, np.ndarray]]:
+    """``(count, episodes)`` per compiled call: ``episodes`` are always ``episodes_per_call()`` x devices
+    indices into ``range(total)``, the first ``count`` real and the rest repeats of the last."""
+    size = episodes_per_call() * len(jax.local_devices())
+    calls = []
+    for start in range(0, total, size):
+        real = np.arange(start, min(start + size, total))
+        calls.append((len(real), np.concatenate([real, np.full(size - len(real), real[-1])])))
+    return calls
+
+
 def on_all_devices(batch: Any) -> Any:
-    """``batch`` (leading axis B) sharded over every local device, padded to a multiple of their
-    number with copies of its last entry (drop the padding from the results: ``[:B]``)."""
+    """``batch`` (its leading axis a multiple of the local devices' number) sharded over all of them."""
     devices = jax.local_devices()
     if len(devices) == 1:
         return batch
-    size = len(jax.tree_util.tree_leaves(batch)[0])
-    pad = -size % len(devices)
-    padded = jax.tree_util.tree_map(lambda leaf: jnp.concatenate([leaf, jnp.repeat(leaf[-1:], pad, axis=0)]) if pad else leaf, batch)
-    sharding = NamedSharding(Mesh(np.array(devices), ("worlds",)), PartitionSpec("worlds"))
-    return jax.device_put(padded, sharding)
+    return jax.device_put(batch, NamedSharding(Mesh(np.array(devices), ("episodes",)), PartitionSpec("episodes")))
 
 
 def evaluate(
@@ -88,6 +115,9 @@ def evaluate(
     keys: jax.Array | None = None,
 ) -> dict[str, np.ndarray]:
     """Roll ``policy`` out ``repeats`` times on each of the B ``worlds`` (a batched world pytree).
+
+    An episode's metrics depend only on its world, its key and the policy (see "Batch
+    invariance" in the module docstring).
 
     Args:
         env: the environment.
@@ -112,20 +142,29 @@ def evaluate(
     keys = episode_keys(key, count, repeats) if keys is None else keys
     if keys.shape[:2] != (count, repeats):
         raise WorldagentError(f"episode keys have shape {keys.shape}; expected ({count}, {repeats}).")
-    host = getattr(policy, "host", False)
-    chunks = []
-    for start in range(0, count, MAX_BATCH):
-        part = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf[start : start + MAX_BATCH]), worlds)
-        part_keys = keys[start : start + MAX_BATCH]
-        if host:
-            from worldagent.evaluation.host import evaluate_host
+    metrics = play_episodes(env, policy, worlds, np.repeat(np.arange(count), repeats), keys.reshape(count * repeats), params, num_steps)
+    return {name: value.reshape(count, repeats, *value.shape[1:]) for name, value in metrics.items()}
 
-            chunks.append(evaluate_host(env, policy, part, part_keys, params, num_steps))
-        else:
-            sharded = on_all_devices((part, part_keys))
-            metrics = _compiled(env, num_steps)(policy, *sharded, params)
-            chunks.append(jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[: len(part_keys)], metrics))
-    return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in chunks[0]}
+
+def play_episodes(env: Environment, policy, worlds: Any, world_of: np.ndarray, keys: jax.Array, params: Any, num_steps: int) -> dict[str, np.ndarray]:
+    """{metric: [E, ...]} of E episodes, episode e played on ``worlds[world_of[e]]`` with ``keys[e]``."""
+    if getattr(policy, "host", False):
+        from worldagent.evaluation.host import evaluate_host
+
+        return in_calls(lambda part, part_keys: evaluate_host(env, policy, part, part_keys, params, num_steps), worlds, world_of, keys)
+    compiled = _compiled(env, num_steps)
+    return in_calls(lambda part, part_keys: compiled(policy, *on_all_devices((part, part_keys)), params), worlds, world_of, keys)
+
+
+def in_calls(run: Callable[[Any, jax.Array], Any], worlds: Any, world_of: np.ndarray, keys: jax.Array) -> Any:
+    """``run(worlds[E], keys[E]) -> arrays [E, ...]`` over every episode, in calls of one fixed E
+    (``episode_calls``); episode e is played on ``worlds[world_of[e]]``, results in episode order."""
+    world_of = np.asarray(world_of)
+    parts = []
+    for count, episodes in episode_calls(len(world_of)):
+        part = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[world_of[episodes]], worlds)
+        parts.append(jax.tree_util.tree_map(lambda value: np.asarray(value)[:count], run(part, keys[episodes])))
+    return jax.tree_util.tree_map(lambda *values: np.concatenate(values), *parts)
 
 
 def summarise(metrics: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:

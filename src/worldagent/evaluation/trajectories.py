@@ -101,12 +101,15 @@ def _compiled(env: Environment, trace, num_steps: int):
 
 
 def _replay_host(env: Environment, trace, policy, world: Any, keys: jax.Array, params: Any, num_steps: int):
-    """``replay_episode``'s outputs for an external (host) policy, from the batched host evaluator."""
+    """``replay_episode``'s outputs for an external (host) policy, from the batched host evaluator
+    in the evaluator's own calls (``local.in_calls``), so the agent sees the batches it was scored in."""
     from worldagent.evaluation.host import host_rollouts
+    from worldagent.evaluation.local import in_calls
 
     worlds = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], world)
-    metrics, steps, (positions, present) = host_rollouts(env, policy, worlds, keys[None], params, num_steps, trace)
-    return positions[0], present[0], steps[0], {name: value[0] for name, value in metrics.items()}
+    run = lambda part, part_keys: host_rollouts(env, policy, part, part_keys, params, num_steps, trace)  # noqa: E731
+    metrics, steps, (positions, present) = in_calls(run, worlds, np.zeros(len(keys), int), keys)
+    return positions, present, steps, metrics
 
 
 def replay(spec, env: Environment, policy, world: Any, keys: jax.Array, params: Any = None, num_steps: int | None = None) -> Episodes:

@@ -11,6 +11,7 @@ Each episode's metrics are kept with the evaluation, raw values beside derived o
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -50,10 +51,29 @@ def episode_records(metrics: dict[str, np.ndarray], world: int) -> list[dict]:
     return [{name: np.asarray(value[world, r]).tolist() for name, value in metrics.items()} for r in range(repeats)]
 
 
-@jax.jit
-def generate(generator, z):
-    """G(z) for a batch of latents, jitted once per batch size (shared by every campaign)."""
-    return generator(z)
+LATENTS_PER_CALL = 32  # G(z) always decodes this many latents at once (see ``generate``): a generation of 21 pads to 32
+
+
+@functools.partial(jax.jit, static_argnames="logits")
+def _decode(generator, z, logits: bool = False):
+    return generator.logits(z) if logits else generator(z)
+
+
+def generate(generator, z, logits: bool = False) -> Any:
+    """G(z) for latents z f[n, dim] (shared by every campaign), in calls of ``LATENTS_PER_CALL``;
+    with ``logits``, the decoder's f32[n, D] cell logits instead of the repaired worlds.
+
+    The decoder's matrix products round differently for different batch sizes, and a repair
+    that picks the nearest world or the top-k cells can tip on the last bit; one call shape
+    makes a latent's world depend on the latent alone, as its episodes do (``evaluation.local``).
+    """
+    z = jnp.asarray(z, jnp.float32)
+    parts = []
+    for start in range(0, len(z), LATENTS_PER_CALL):
+        chunk = z[start : start + LATENTS_PER_CALL]
+        padded = jnp.concatenate([chunk, jnp.repeat(chunk[-1:], LATENTS_PER_CALL - len(chunk), axis=0)])
+        parts.append(jax.tree_util.tree_map(lambda leaf, n=len(chunk): leaf[:n], _decode(generator, padded, logits)))
+    return jax.tree_util.tree_map(lambda *leaves: jnp.concatenate(leaves), *parts)
 
 
 class LatentObjective:

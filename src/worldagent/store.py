@@ -228,16 +228,21 @@ class RunStore:
     def open_campaign(
         self, name: str, env: str, objective: str, maximize: bool, optimiser: str, budget: int, seed: int, config: dict, resume: bool
     ) -> Campaign:
-        """Create campaign ``name``, or (``resume``) return it after checking it is the same campaign."""
+        """Create campaign ``name``, or (``resume``) return it after checking it is the same campaign.
+
+        Safe when several connections create the same campaign at once: one creates it, the
+        others find it (and resume it, or are refused without ``resume``)."""
         existing = self.campaign(name)
         wanted = dict(env=env, objective=objective, maximize=bool(maximize), optimiser=optimiser, seed=int(seed), config=config)
         if existing is None:
-            with self.db:
-                self.db.execute(
-                    "INSERT INTO campaigns (name, env, objective, maximize, optimiser, budget, seed, config, created) VALUES (?,?,?,?,?,?,?,?,?)",
-                    (name, env, objective, int(maximize), optimiser, int(budget), int(seed), json.dumps(config, sort_keys=True), time.time()),
-                )
-            return self.campaign(name)
+            created = self.db.execute(  # one statement, atomic: a campaign another connection just made is left as it is
+                "INSERT INTO campaigns (name, env, objective, maximize, optimiser, budget, seed, config, created) VALUES (?,?,?,?,?,?,?,?,?) "
+                "ON CONFLICT(name) DO NOTHING",
+                (name, env, objective, int(maximize), optimiser, int(budget), int(seed), json.dumps(config, sort_keys=True), time.time()),
+            ).rowcount
+            existing = self.campaign(name)
+            if created:
+                return existing
         if not resume:
             raise WorldagentError(f"campaign {name!r} already exists in {self.path}; pass --resume to continue it or choose another --name.")
         have = dict(

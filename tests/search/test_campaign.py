@@ -131,6 +131,41 @@ def test_many_connections_opening_a_new_store_at_once_all_succeed(tmp_path):
     assert not errors
 
 
+def test_two_connections_creating_the_same_campaign_at_once_both_get_it(tmp_path):
+    # Each read "no such campaign" and inserted it: the second insert broke UNIQUE(name) (issue 30, item 7).
+    with RunStore(tmp_path):
+        pass
+    connections, trials = 4, 60
+    barrier = threading.Barrier(connections, timeout=60)
+    found: dict = {}  # (trial, resume) -> ids or errors
+
+    def create():
+        with RunStore(tmp_path) as store:  # a connection of its own, as another process has
+            for trial in range(trials):
+                resume = trial % 2 == 0
+                barrier.wait()
+                try:
+                    outcome = store.open_campaign(f"c{trial}", "racing", "reward", True, "cmaes", 6, 0, {"popsize": 6}, resume).id
+                except Exception as error:
+                    outcome = error
+                found.setdefault(trial, []).append(outcome)
+
+    threads = [threading.Thread(target=create) for _ in range(connections)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    for trial, outcomes in sorted(found.items()):
+        ids = {o for o in outcomes if isinstance(o, int)}
+        refused = [o for o in outcomes if not isinstance(o, int)]
+        if trial % 2 == 0:  # --resume: every one gets the one campaign
+            assert len(outcomes) == connections and not refused and len(ids) == 1, outcomes
+        else:  # one creates it; the others are told it exists (pass --resume)
+            assert len(ids) == 1 and len(refused) == connections - 1, outcomes
+            assert all(isinstance(e, WorldagentError) and "--resume" in str(e) for e in refused), outcomes
+    assert len(found) == trials
+
+
 def test_nan_scores_are_stored_and_reported_not_optimised(tmp_path):
     def broken(z, seeds):
         outcomes = noisy_sphere(z, seeds)

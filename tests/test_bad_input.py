@@ -18,6 +18,9 @@ from worldagent.files import can_create_files_in
 runner = CliRunner()
 
 HEAVY = ["--agent", "driver", "--generator", "no-generator-here"]  # never loaded when a check fails first
+TRAIN_HEAVY = ["--worlds", "vae", "--generator", "no-generator-here"]  # train's worlds: never loaded when a check fails first
+INFLUENCE = ["influence", "racing", *HEAVY, "--select", "crash_rate > 0.5"]
+REPRODUCE = ["reproduce", "--preset", "tiny", "--env", "racing"]
 
 
 def one_line(result) -> str:
@@ -53,6 +56,14 @@ def cases(p: dict) -> list[tuple[list[str], str]]:
         (["compare", "racing", *HEAVY, "--out", p["file"]], "is a file; pass a folder"),
         (["generator", "train", "racing", "--out", p["file"]], "is a file; pass a folder"),
         (["generator", "show", "no-generator-here", "--out", p["file"]], "is a file; pass a folder"),
+        (["train", "racing", *TRAIN_HEAVY, "--out", p["file"]], "--out {file} is a file; pass a folder"),
+        (["train", "racing", *TRAIN_HEAVY, "--out", under_file], "is a file, not a folder"),
+        ([*INFLUENCE, "--out", p["file"]], "is a file; pass a folder"),
+        ([*INFLUENCE, "--out", under_file], "is a file, not a folder"),
+        ([*REPRODUCE, "--out", p["file"]], "is a file; pass a folder"),
+        ([*REPRODUCE, "--out", under_file], "is a file, not a folder"),
+        (["report", p["file"]], "RUN_DIR {file} is a file; pass a folder"),
+        (["report", under_file], "is a file, not a folder; choose another RUN_DIR"),
         # seeds
         (["worlds", "racing", "--seed", "-1", "--out", f"{p['dir']}/w.png"], "--seed is -1; seeds are integers from 0"),
         (["play", "racing", "--policy", "driver", "--seed", "-1", "--out", f"{p['dir']}/e.png"], "--seed is -1"),
@@ -64,6 +75,9 @@ def cases(p: dict) -> list[tuple[list[str], str]]:
         (["compare", "racing", *HEAVY, "--random-seed", "-5", "--out", p["new"]], "--random-seed is -5"),
         (["generator", "train", "racing", "--seed", "-1", "--out", p["new"]], "--seed is -1"),
         (["generator", "report", "no-generator-here", "--seed", "-1"], "--seed is -1"),
+        (["train", "racing", *TRAIN_HEAVY, "--seed", "-1", "--out", p["new"]], "--seed is -1"),
+        (["train", "racing", *TRAIN_HEAVY, "--seed", "99999999999", "--out", p["new"]], "seeds are integers from 0 to 2,147,483,647"),
+        ([*INFLUENCE, "--seed", "-1", "--out", p["new"]], "--seed is -1"),
         # sizes
         (["worlds", "racing", "--n", "200000", "--out", f"{p['dir']}/w.png"], "--n is 200,000, above the cap of 256"),
         (["play", "racing", "--policy", "driver", "--episodes", "100000", "--out", f"{p['dir']}/e.png"], "above the cap of 256"),
@@ -75,6 +89,17 @@ def cases(p: dict) -> list[tuple[list[str], str]]:
         (["search", "racing", *HEAVY, "--budget", "0", "--out", p["new"]], "--budget is 0"),
         (["strategic", "racing", *HEAVY, "--random-worlds", "100000000", "--out", p["new"]], "--random-worlds is 100,000,000, above the cap"),
         (["compare", "racing", *HEAVY, "--seeds", "5000", "--out", p["new"]], "--seeds is 5,000, above the cap of 1,000"),
+        (["train", "racing", *TRAIN_HEAVY, "--episodes", "0", "--out", p["new"]], "--episodes is 0; it must be at least 1"),
+        (["train", "racing", *TRAIN_HEAVY, "--episodes", "1000000000000", "--out", p["new"]], "--episodes is 1,000,000,000,000, above the cap"),
+        ([*INFLUENCE, "--episodes", "1000000000000", "--out", p["new"]], "--episodes is 1,000,000,000,000, above the cap"),
+        ([*INFLUENCE, "--seeds", "0", "--out", p["new"]], "--seeds is 0; it must be at least 1"),
+        ([*INFLUENCE, "--candidates", "0", "--out", p["new"]], "--candidates is 0; it must be at least 1"),
+        ([*INFLUENCE, "--eval-worlds", "100000000", "--out", p["new"]], "--eval-worlds is 100,000,000, above the cap"),
+        ([*INFLUENCE, "--repeats", "100000000", "--out", p["new"]], "--repeats is 100,000,000, above the cap of 1,000"),
+        ([*INFLUENCE, "--search-budget", "-1", "--out", p["new"]], "--search-budget is -1; pass 0 (no search) or more"),
+        ([*INFLUENCE, "--search-budget", "100000000", "--out", p["new"]], "--search-budget is 100,000,000, above the cap"),
+        ([*INFLUENCE, "--search", "annealing", "--out", p["new"]], "unknown --search 'annealing'; use one of: cmaes, atlas"),
+        ([*REPRODUCE, "--restart", "everything", "--out", p["new"]], "unknown phase 'everything'"),
         # options, descriptors and failure events, checked before the agent and generator load
         (["atlas", "racing", *HEAVY, "--budget", "0", "--out", p["new"]], "--budget is 0"),
         (["atlas", "racing", *HEAVY, "--descriptors", "wingspan", "--out", p["new"]], "unknown descriptor 'wingspan' for racing"),
@@ -93,7 +118,7 @@ def cases(p: dict) -> list[tuple[list[str], str]]:
 def test_bad_input_gets_one_line_before_anything_loads(paths):
     for args, message in cases(paths):
         line = one_line(runner.invoke(app, args))
-        assert message in line, (args, line)
+        assert message.format(**paths) in line, (args, line)
     assert not Path(paths["new"]).exists() and not any(Path(paths["dir"]).iterdir()), "a refused command wrote something"
 
 
@@ -115,10 +140,20 @@ def damaged_store(folder):
 
 
 def test_a_damaged_store_is_refused_before_anything_loads(tmp_path):
+    from worldagent.commands.reproduce import check_reproduce_dir
+
     run = damaged_store(tmp_path / "run")
-    for command in (["search", "racing"], ["atlas", "racing"], ["evaluate", "random", "racing"]):
-        line = one_line(runner.invoke(app, [*command, *HEAVY, "--out", str(run)]))
+    commands = [[name, "racing", *HEAVY] for name in ("search", "atlas", "strategic", "compare")]
+    failure_rate = ["failure-rate", "racing", *HEAVY, "--event", "crash_rate > 0.5"]
+    for command in (*commands, failure_rate, ["evaluate", "random", "racing", *HEAVY], INFLUENCE):
+        line = one_line(runner.invoke(app, [*command, "--out", str(run)]))
         assert "store.sqlite is damaged" in line and "restore it from a copy" in line
+    # a reproduce run directory keeps one store an environment; the report reads them all
+    damaged_store(tmp_path / "reproduce" / "racing")
+    for command in ([*REPRODUCE, "--out", str(tmp_path / "reproduce")], ["report", str(tmp_path / "reproduce")]):
+        line = one_line(runner.invoke(app, command))
+        assert f"{tmp_path / 'reproduce' / 'racing' / 'store.sqlite'} is damaged" in line and "restore it from a copy" in line
+    check_reproduce_dir(tmp_path / "reproduce", ["racing"], ["random", "strategic"])  # redoing random deletes the store: no refusal
 
 
 @pytest.fixture
@@ -140,8 +175,16 @@ def test_read_only_outputs_and_stores(read_only):
 
     line = one_line(runner.invoke(app, ["worlds", "racing", "--out", str(read_only / "w.png")]))
     assert f"cannot create files in {read_only}" in line
-    line = one_line(runner.invoke(app, ["search", "racing", *HEAVY, "--out", str(read_only / "run")]))
-    assert "cannot create files in" in line
+    for command in (
+        ["search", "racing", *HEAVY, "--out"],
+        ["train", "racing", *TRAIN_HEAVY, "--out"],
+        [*INFLUENCE, "--out"],
+        [*REPRODUCE, "--out"],
+        ["report"],
+    ):
+        for run in (read_only, read_only / "run"):
+            line = one_line(runner.invoke(app, [*command, str(run)]))
+            assert f"cannot create files in {read_only}" in line, (command, line)
     locked = read_only.parent / "locked"
     (locked / "inner").mkdir(parents=True)
     locked.chmod(0o000)  # not even readable: nothing inside it can be looked at

@@ -162,7 +162,7 @@ def test_train_harvest_with_a_tagger(tmp_path):
 def test_train_refuses_bad_requests_in_one_line(tmp_path):
     cases = [
         (["train", "racing", "--algo", "dqn"], "unknown algorithm 'dqn' for racing"),
-        (["train", "racing", "--episodes", "0"], "at least one episode"),
+        (["train", "racing", "--episodes", "0"], "--episodes is 0; it must be at least 1"),
         (["train", "harvest", "--worlds", "vae"], "--generator"),
         (["train", "racing", "--option", "tagger=0"], "racing has no option 'tagger'"),
         (["train", "racing", "--worlds", str(tmp_path / "missing.npz")], "does not exist"),

@@ -13,12 +13,16 @@ from worldagent.commands.options import (
     algo_help,
     algorithm,
     check_counts,
+    check_run_dir,
+    check_seed,
+    check_training_episodes,
     env_argument,
     given_options,
     option_flag,
     set_flag,
     stochastic_flag,
 )
+from worldagent.errors import WorldagentError
 
 RESULT_FILE = "influence.json"  # what ``experiments.influence`` writes in its run directory
 SELECT_HELP = (
@@ -53,6 +57,21 @@ def result_table(result: dict):
     return table
 
 
+def check_influence_counts(search_budget: int, **counts: int) -> None:
+    """The counts of ``influence``: ``--search-budget`` may be 0 (no search), the others at least 1; all capped."""
+    if search_budget < 0:
+        raise WorldagentError(f"--search-budget is {search_budget}; pass 0 (no search) or more.")
+    check_counts(**counts, **({"search_budget": search_budget} if search_budget else {}))
+
+
+def check_search(search: str) -> None:
+    """``--search``: one of the influence experiment's searches."""
+    from worldagent.influence.experiment import SEARCHES
+
+    if search not in SEARCHES:
+        raise WorldagentError(f"unknown --search {search!r}; use one of: {', '.join(SEARCHES)}.")
+
+
 def influence_command(
     env: str,
     agent: str,
@@ -80,7 +99,11 @@ def influence_command(
 
     selection = parse_selection(select, env)  # before anything slow: a typo costs nothing
     algo = algorithm(env, algo)
-    check_counts(seeds=seeds)
+    check_influence_counts(seeds=seeds, candidates=candidates, search_budget=search_budget, eval_worlds=eval_worlds, repeats=repeats)
+    check_training_episodes(episodes)
+    check_seed(seed)
+    check_search(search)
+    check_run_dir(out)
     options = given_options(env, option)
     chosen = parse_settings(settings, [algo])[algo]
     training_config(env, algo, episodes, options=options, **chosen)  # a bad value is refused before the agent and generator load

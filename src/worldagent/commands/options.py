@@ -100,7 +100,11 @@ COUNT_CAPS = {
     "random_worlds": 10_000_000,
     "seeds": 1_000,
     "samples": 1_000_000,
+    "candidates": 10_000_000,
+    "eval_worlds": 10_000_000,
+    "search_budget": 10_000_000,
 }
+TRAINING_EPISODES_CAP = 10_000_000  # training episodes of one agent (1,000x the paper's 10,000)
 DATASET_CAP = 1_000_000  # worlds in a dataset (100x the paper's; racing's take about 12 GB)
 PICTURE_CAP = 256  # worlds or episodes drawn on one picture (a 16 x 16 sheet)
 MAX_SEED = 2**31 - 1  # seeds reach jax.random.key, which keeps 32 bits, and worlds SEED + i must too
@@ -138,19 +142,34 @@ def check_optimiser(name: str) -> None:
         raise WorldagentError(f"unknown optimiser {name!r}; use one of: {', '.join(OPTIMISERS)}.")
 
 
+def check_training_episodes(episodes: int | None) -> None:
+    """``--episodes`` of training: unset (the algorithm's budget), or from 1 to ``TRAINING_EPISODES_CAP``."""
+    if episodes is not None:
+        check_counts(caps={"episodes": TRAINING_EPISODES_CAP}, episodes=episodes)
+
+
+def check_store(store_file: Path) -> None:
+    """A run store that already exists, before anything heavy loads: writable, a store, and intact
+    (a rerun resumes from it). One that does not exist yet passes."""
+    from worldagent.store import RunStore
+
+    store_file = Path(store_file)
+    if not store_file.exists():
+        return
+    if not os.access(store_file, os.W_OK):  # SQLite would open it read-only and fail at the first write
+        raise WorldagentError(f"{store_file} is read-only; make it writable or choose another --out.")
+    with RunStore(store_file, create=False) as store:
+        store.check_intact()
+
+
 def check_run_dir(out: Path) -> None:
     """A run directory ``--out``, before anything heavy loads: it can be written, and a store
     already in it opens and is intact (a rerun resumes from it)."""
     from worldagent.files import check_writable
-    from worldagent.store import STORE_FILE, RunStore
+    from worldagent.store import STORE_FILE
 
     check_writable(out, folder=True)
-    store_file = Path(out) / STORE_FILE
-    if store_file.exists():
-        if not os.access(store_file, os.W_OK):  # SQLite would open it read-only and fail at the first write
-            raise WorldagentError(f"{store_file} is read-only; make it writable or choose another --out.")
-        with RunStore(out, create=False) as store:
-            store.check_intact()
+    check_store(Path(out) / STORE_FILE)
 
 
 def algorithm(env: str, algo: str | None) -> str:

@@ -7,13 +7,38 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors, status_line
-from worldagent.commands.options import set_flag
+from worldagent.commands.options import check_store, set_flag
+from worldagent.files import check_writable
 
 REPRODUCE_SET_HELP = (
     "A training setting NAME=VALUE (repeatable): sets that field of the config of every env's algorithm that has it; "
     "ALGO.NAME=VALUE only for agents trained with ALGO, e.g. --set ppo.learning_rate=1e-3. Over the algorithm's defaults and the env's own "
     "settings; the agent and influence phases record it, and changing it redoes them."
 )
+
+
+def check_reproduce_dir(out: Path, envs: list[str], redo: list[str]) -> None:
+    """A ``reproduce`` run directory, before any phase runs: it and each env's folder can be written,
+    and each env's store is intact unless ``redo`` (the phases to redo) replaces it."""
+    from worldagent.reproduce.layout import RunLayout
+
+    check_writable(out, folder=True)
+    for env in envs:
+        layout = RunLayout(out, env)
+        check_writable(layout.dir, folder=True)
+        if "random" not in redo:  # redoing "random" deletes the store
+            check_store(layout.store_path)
+
+
+def check_report_dir(run_dir: Path) -> None:
+    """``report RUN_DIR``: a folder the report can be written in, whose stores are intact."""
+    from worldagent.reports.html import REPORT_FILE
+    from worldagent.store import STORE_FILE
+
+    check_writable(run_dir, folder=True, option="RUN_DIR")
+    check_writable(run_dir / REPORT_FILE, folder=False, option="RUN_DIR")
+    for store in sorted(run_dir.glob(f"*/{STORE_FILE}")):  # one an environment
+        check_store(store)
 
 
 def register(app: typer.Typer) -> None:
@@ -44,7 +69,7 @@ def register(app: typer.Typer) -> None:
         """Run the paper end to end: datasets, generators, agents, random and strategic evaluation, ES vs BO, influencing; then the HTML report."""
         from worldagent.agents.algorithms import parse_settings
         from worldagent.reproduce.pipeline import reproduce as run
-        from worldagent.reproduce.pipeline import resolve_envs
+        from worldagent.reproduce.pipeline import resolve_envs, restart_closure
         from worldagent.reproduce.presets import get_preset
 
         chosen = get_preset(preset).with_algo(algo)
@@ -54,6 +79,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(chosen.show())
             return
         out = out or Path("runs") / chosen.name
+        check_reproduce_dir(out, envs, restart_closure(restart))
         manifest = run(chosen, out, envs, restart=restart, progress=not quiet, echo=status_line)
         failed = [key for key, entry in manifest.data["phases"].items() if entry.get("status") == "failed"]
         if failed:
@@ -66,4 +92,5 @@ def register(app: typer.Typer) -> None:
         """Rebuild RUN_DIR/report.html from the run's manifest, stores and phase outputs."""
         from worldagent.reports.html import build_report
 
+        check_report_dir(run_dir)
         console.print(f"wrote {build_report(run_dir)}")

@@ -7,8 +7,18 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors
-from worldagent.commands.options import algo_help, algorithm, env_argument, env_options, option_flag, set_flag
+from worldagent.commands.options import (
+    algo_help,
+    algorithm,
+    check_seed,
+    check_training_episodes,
+    env_argument,
+    env_options,
+    option_flag,
+    set_flag,
+)
 from worldagent.errors import WorldagentError
+from worldagent.files import check_writable
 
 
 def register(app: typer.Typer) -> None:
@@ -40,8 +50,9 @@ def register(app: typer.Typer) -> None:
         spec = registry.get(env)
         algo = algorithm(env, algo)
         options = env_options(env, option)
-        if episodes is not None and episodes < 1:
-            raise WorldagentError(f"--episodes {episodes}; train for at least one episode.")
+        check_training_episodes(episodes)
+        check_seed(seed)
+        check_writable(out, folder=True)
         if worlds == "vae" and generator is None:
             raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
         config = training_config(spec, algo, episodes=episodes, options=options, **parse_settings(settings, [algo])[algo])

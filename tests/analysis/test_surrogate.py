@@ -43,5 +43,7 @@ def test_cached_descriptors_are_read_back_extended_and_a_missing_file_is_refused
     np.testing.assert_array_equal(longer[:6], first)
     np.testing.assert_array_equal(again[:, 0], z[:, 0] * 2)
     assert calls == [6, 6]
+    kept = surrogate.cached_describer(path, None)
+    assert kept.held() == 12 and kept.seconds_per_world() > 0  # what a later run's plan counts as described, and at what cost
     with pytest.raises(WorldagentError, match="missing or stale; rerun `worldagent failure-rate`"):
         surrogate.cached_describer(tmp_path / "pools" / "other.npz", None)(z)

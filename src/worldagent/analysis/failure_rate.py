@@ -356,8 +356,9 @@ def surrogate_sampling(
     estimate (``fallback`` says why); else the rest of the pool is described and the strata drawn.
 
     Args:
-        timing: {"episode_seconds", "describe_seconds"} per world, to replay a recorded plan
-            (``Estimate.plan``) instead of measuring: a replayed pilot costs no time.
+        timing: {"episode_seconds", "describe_seconds"} per world and "described" (pool rows kept from before), to
+            replay a recorded plan instead of measuring (a replayed pilot costs no time); an empty mutable mapping is
+            filled with what was measured (``stored.KeptTiming`` writes it down before anything is decided).
         say: called with one line before the pool is described, or when falling back.
         prior: draws the pool's latents and the fallback's (``standard_prior``).
     """
@@ -372,10 +373,24 @@ def surrogate_sampling(
     ]
     margins, seen = np.concatenate([s.margin for s in pilot]), np.concatenate([s.event for s in pilot])
     described = None if describe is None else describing.timed(describe, sample)(pool)
-    timing = dict(timing or {"episode_seconds": play.per_world, "describe_seconds": describing.per_world if describe else 0.0})
+    if not timing:  # a sample read back from a cache took no time: the seconds a row took when it was described
+        kept_seconds, held = getattr(describe, "seconds_per_world", lambda: 0.0)(), getattr(describe, "held", lambda: 0)()
+        measured = {"episode_seconds": play.per_world, "describe_seconds": max(describing.per_world, kept_seconds) if describe else 0.0}
+        measured["described"] = max(sample, held)  # pool rows this run need not describe
+        timing = measured if timing is None else (timing.update(measured) or timing)
     size = pooled.pool_size(config.pool, config.pool_seconds, timing["describe_seconds"], sample)
     strata = pooled.stratify(pooled.pool_chances(pool, described, sample, margins))
-    plan = pooled.plan(strata, size, config.pilot, worlds, target_width, timing["episode_seconds"], timing["describe_seconds"], sample, confidence)
+    plan = pooled.plan(
+        strata,
+        size,
+        config.pilot,
+        worlds,
+        target_width,
+        timing["episode_seconds"],
+        timing["describe_seconds"],
+        timing.get("described", sample),
+        confidence,
+    )
     if plan.fallback:
         say(f"{plan.fallback}: Monte Carlo instead, starting from the pilot's {config.pilot:,} prior worlds.")
         rng = np.random.default_rng([seed, IS_STREAM, FALLBACK_DRAWS])

@@ -202,8 +202,8 @@ def plan(
     if MIN_GAIN > 0 and not width <= 1:
         fallback = f"the pilot's model cannot place the event (±{width:.0%} predicted after {draws:,} draws)"
     elif min(gain_episodes, gain_seconds) < MIN_GAIN:
-        what = "in episodes" if gain_episodes < MIN_GAIN else "in seconds, describing the pool included"
-        fallback = f"importance sampling is predicted to gain {min(gain_episodes, gain_seconds):.2g}x over Monte Carlo {what} (below {MIN_GAIN}x)"
+        what, gain = ("in episodes", gain_episodes) if gain_episodes < MIN_GAIN else ("in seconds, describing the pool included", gain_seconds)
+        fallback = f"importance sampling is predicted to gain {gain:.2g}x over Monte Carlo {what} (below {MIN_GAIN}x)"
     return Plan(
         pool, draws, probability, width, mc, gain_episodes, gain_seconds, episode_seconds, describe_seconds, describe_total, fallback
     )  # fmt: skip

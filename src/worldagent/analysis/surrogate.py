@@ -146,38 +146,58 @@ def pool_cache(store_path: Any, generator_fingerprint: str, seed: int) -> Path:
     return Path(store_path).parent / "pools" / f"{generator_fingerprint}-s{int(seed)}.npz"
 
 
-def cached_describer(path: Any, describe: Callable[[np.ndarray], np.ndarray] | None) -> Callable[[np.ndarray], np.ndarray]:
-    """``describe`` that keeps the longest pool prefix it described at ``path`` (its latents and descriptors) and
-    describes only the rows past it; latents that differ from the kept ones are described afresh.
+def cached_describer(path: Any, describe: Callable[[np.ndarray], np.ndarray] | None) -> CachedDescriber:
+    """``describe`` that keeps the longest pool prefix it described at ``path`` (``CachedDescriber``)."""
+    return CachedDescriber(Path(path), describe)
 
-    A replay with no generator passes ``describe`` None: rows it does not hold are then refused.
+
+class CachedDescriber:
+    """``describe(z f64[n, dim]) -> f64[n, k]`` that keeps the longest pool prefix it described (its latents, descriptors
+    and the seconds a row took) in one .npz, and describes only the rows past it; latents that differ from the kept
+    ones are described afresh. A replay with no generator passes ``describe`` None: rows it does not hold are refused.
     """
-    from worldagent.files import write_atomically
 
-    path = Path(path)
+    def __init__(self, path: Path, describe: Callable[[np.ndarray], np.ndarray] | None):
+        self.path, self.describe = Path(path), describe
 
-    def save(z: np.ndarray, described: np.ndarray, tmp: Path) -> None:
-        with open(tmp, "wb") as handle:
-            np.savez(handle, z=z, described=described)
+    def _load(self) -> tuple[np.ndarray | None, np.ndarray | None, float]:
+        if not self.path.exists():
+            return None, None, 0.0
+        with np.load(self.path, allow_pickle=False) as stored:
+            return stored["z"], stored["described"], float(stored["seconds_per_world"]) if "seconds_per_world" in stored.files else 0.0
 
-    def kept(z: np.ndarray) -> np.ndarray:
+    def held(self) -> int:
+        """Rows kept (a prefix of the pool's stream when the latents match)."""
+        return 0 if self._load()[0] is None else len(self._load()[0])
+
+    def seconds_per_world(self) -> float:
+        """What describing a row took when the kept rows were described (0 when none were)."""
+        return self._load()[2]
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        import time
+
+        from worldagent.files import write_atomically
+
         z = np.asarray(z, np.float64)
-        held_z, held = np.zeros((0, z.shape[1])), None
-        if path.exists():
-            with np.load(path, allow_pickle=False) as stored:
-                held_z, held = stored["z"], stored["described"]
-        shared = min(len(held_z), len(z))
+        held_z, held, per_world = self._load()
+        shared = 0 if held_z is None else min(len(held_z), len(z))
         if held is None or held_z.shape[1:] != z.shape[1:] or not np.array_equal(held_z[:shared], z[:shared]):
-            held_z, held, shared = z[:0], None, 0
+            held, shared, per_world = None, 0, 0.0
         if shared == len(z):
             return held[: len(z)]
-        if describe is None:
+        if self.describe is None:
             raise WorldagentError(
-                f"{path} (the pool's descriptors) is missing or stale; rerun `worldagent failure-rate` with the estimate's settings."
+                f"{self.path} (the pool's descriptors) is missing or stale; rerun `worldagent failure-rate` with the estimate's settings."
             )
-        rest = np.asarray(describe(z[shared:]), np.float64).reshape(len(z) - shared, -1)
+        started = time.perf_counter()
+        rest = np.asarray(self.describe(z[shared:]), np.float64).reshape(len(z) - shared, -1)
+        per_world = (per_world * shared + time.perf_counter() - started) / len(z)
         described = rest if held is None else np.concatenate([held[:shared], rest])
-        write_atomically(path, lambda tmp: save(z, described, tmp))
-        return described
 
-    return kept
+        def save(tmp: Path) -> None:
+            with open(tmp, "wb") as handle:
+                np.savez(handle, z=z, described=described, seconds_per_world=per_world)
+
+        write_atomically(self.path, save)
+        return described

@@ -373,11 +373,7 @@ def surrogate_sampling(
     ]
     margins, seen = np.concatenate([s.margin for s in pilot]), np.concatenate([s.event for s in pilot])
     described = None if describe is None else describing.timed(describe, sample)(pool)
-    if not timing:  # a sample read back from a cache took no time: the seconds a row took when it was described
-        kept_seconds, held = getattr(describe, "seconds_per_world", lambda: 0.0)(), getattr(describe, "held", lambda: 0)()
-        measured = {"episode_seconds": play.per_world, "describe_seconds": max(describing.per_world, kept_seconds) if describe else 0.0}
-        measured["described"] = max(sample, held)  # pool rows this run need not describe
-        timing = measured if timing is None else (timing.update(measured) or timing)
+    timing = _timing(timing, describe, play.per_world, describing.per_world, sample)
     size = pooled.pool_size(config.pool, config.pool_seconds, timing["describe_seconds"], sample)
     strata = pooled.stratify(pooled.pool_chances(pool, described, sample, margins))
     plan = pooled.plan(
@@ -419,6 +415,21 @@ def surrogate_sampling(
         note = f"reached ±{found.relative_half_width:.0%}, short of ±{target_width:.0%}, after the {plan.draws:,} draws of {why}"
         found = Estimate(**{**asdict(found), "note": note, "plan": plan.as_dict()})
     return found
+
+
+def _timing(timing: Mapping | None, describe: Any, episode_seconds: float, describe_seconds: float, sample: int) -> Mapping:
+    """The per-world seconds the plan uses: ``timing`` when it holds a recorded plan's, else the measured ones (written
+    into ``timing`` when it is an empty mutable mapping). A sample read back from a cache took no time to describe, so
+    the seconds a row took when it was described stand in, and the rows the cache holds need no describing."""
+    if timing:
+        return timing
+    kept_seconds, held = getattr(describe, "seconds_per_world", lambda: 0.0)(), getattr(describe, "held", lambda: 0)()
+    measured = {"episode_seconds": episode_seconds, "describe_seconds": max(describe_seconds, kept_seconds) if describe else 0.0}
+    measured["described"] = max(sample, held)
+    if timing is None:
+        return measured
+    timing.update(measured)
+    return timing
 
 
 def _timed(estimate: Estimate, started: float) -> Estimate:

@@ -17,10 +17,16 @@ as for local runs.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import os
+import socket
+import tempfile
+import threading
 import uuid
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +35,7 @@ from worldagent.errors import WorldagentError
 
 BACKENDS = ("local", "ray")
 TASK_RETRIES = 3  # re-runs of a batch whose worker died
+JOIN_TIMEOUT_S = 30  # Ray itself waits for an unanswering cluster for minutes
 
 Batch = tuple[list[int], np.ndarray, np.ndarray]  # (slots, z[n, dim], seeds[n])
 
@@ -62,17 +69,7 @@ class RayBackend:
             raise WorldagentError("--backend ray needs Ray: pip install 'worldagent[ray]'.") from None
         self.ray = ray
         if not ray.is_initialized():
-            try:
-                ray.init(
-                    address=address,
-                    num_cpus=None if address else workers,
-                    include_dashboard=False,
-                    log_to_driver=False,
-                    logging_level=logging.ERROR,  # our progress bar, not Ray's start-up chatter
-                )
-            except (ConnectionError, RuntimeError, ValueError) as error:
-                first = (str(error).splitlines() or [""])[0][:160]
-                raise WorldagentError(f"cannot join the Ray cluster at {address or 'a new local cluster'} ({first}); check --ray-address.") from None
+            join_cluster(ray, address, workers)
         self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         self._task = ray.remote(max_retries=TASK_RETRIES)(_evaluate_batch)
         self._shipped: dict[int, tuple[str, Any]] = {}
@@ -96,6 +93,80 @@ class RayBackend:
         if key not in self._shipped:
             self._shipped[key] = (uuid.uuid4().hex, self.ray.put(evaluate))
         return self._shipped[key]
+
+
+def join_cluster(ray: Any, address: str | None, workers: int | None) -> None:
+    """``ray.init`` the cluster at ``address`` (None: a new local one), or fail in one line within
+    ``JOIN_TIMEOUT_S`` saying why: nothing listening, no answer, or Ray's own reason (e.g. a token)."""
+    where = address or "a new local cluster"
+    check_listening(address)
+    outcome: dict[str, BaseException | None] = {}
+
+    def join() -> None:
+        try:
+            ray.init(
+                address=address,
+                num_cpus=None if address else workers,
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level=logging.ERROR,  # our progress bar, not Ray's start-up chatter
+            )
+            outcome["error"] = None
+        except BaseException as error:  # reported below, in the caller's thread
+            outcome["error"] = error
+
+    with stderr_to_file() as log:  # Ray's core logs its real reasons to stderr, not in the exception
+        if address:  # in a thread, to stop waiting; a new local cluster starts here (its processes die with their thread)
+            thread = threading.Thread(target=join, daemon=True)
+            thread.start()
+            thread.join(JOIN_TIMEOUT_S)
+        else:
+            join()
+        logged = log.read_text(errors="replace")
+    if "error" not in outcome:
+        raise WorldagentError(
+            f"the Ray cluster at {where} did not answer within {JOIN_TIMEOUT_S} s; check --ray-address (is it a Ray head's GCS port?)."
+        )
+    if outcome["error"] is not None:
+        raise WorldagentError(f"cannot join the Ray cluster at {where}: {join_failure(outcome['error'], logged)}") from None
+
+
+def join_failure(error: BaseException, log: str) -> str:
+    """Why joining failed, in words that name the fix (Ray's logged cause beats its exception)."""
+    if "Unauthenticated" in log or "InvalidAuthToken" in log:
+        return "the cluster requires a token; run with RAY_AUTH_MODE=token and the head's token (~/.ray/auth_token, RAY_AUTH_TOKEN or RAY_AUTH_TOKEN_PATH)."
+    first = (str(error).splitlines() or [""])[0][:160] or type(error).__name__
+    return f"{first}; check --ray-address."
+
+
+def check_listening(address: str | None) -> None:
+    """One line, at once, when nothing listens at a ``HOST:PORT`` address (Ray would wait for minutes)."""
+    if not address or address == "auto":
+        return
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        raise WorldagentError(f"--ray-address {address!r} is not HOST:PORT; pass the address `ray start --head` prints, e.g. 127.0.0.1:6379.")
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as error:
+        raise WorldagentError(
+            f"nothing answers at {address} ({error.strerror or error}); start a cluster with `ray start --head` or fix --ray-address."
+        ) from None
+
+
+@contextlib.contextmanager
+def stderr_to_file():
+    """File descriptor 2 (where Ray's C++ core logs) sent to a temporary file, yielded as a Path."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "ray-join.log"
+        saved = os.dup(2)
+        with open(path, "wb") as sink:
+            os.dup2(sink.fileno(), 2)
+            try:
+                yield path
+            finally:
+                os.dup2(saved, 2)
+                os.close(saved)
 
 
 _WORKER_CACHE: dict[str, Callable] = {}  # in each worker: evaluators by token, so jitted code compiles once

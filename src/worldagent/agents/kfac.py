@@ -380,7 +380,9 @@ class KFAC:
             mix = lambda old, new: jnp.where(first, new, cfg.stat_decay * old + (1.0 - cfg.stat_decay) * new)  # noqa: E731
             factors[name] = f.replace(a=mix(f.a, batch_a), g=mix(f.g, batch_g))
         refresh = state.count % cfg.inverse_every == 0
-        factors = jax.lax.cond(refresh, lambda fs: {k: self._invert(v) for k, v in fs.items()}, lambda fs: fs, factors)
+        factors = _run_by_run(lambda refresh, fs: jax.lax.cond(refresh, lambda fs: {k: self._invert(v) for k, v in fs.items()}, lambda fs: fs, fs))(
+            refresh, factors
+        )
         state = state.replace(factors=factors)
 
         direction = self.precondition(grads, state)
@@ -391,3 +393,11 @@ class KFAC:
         new_params = jax.tree_util.tree_map(lambda p, v: p - (1.0 - cfg.momentum) * v, params, velocity)
         info = {"step_size": step_size, "fisher_quadratic": quadratic, "clipped": (bound < cfg.learning_rate).astype(jnp.float32)}
         return new_params, state.replace(velocity=velocity, count=state.count + 1), info
+
+
+def _run_by_run(fn):
+    """``fn`` that ``jax.vmap`` maps run by run (``lax.map``) instead of batching: vmapped runs
+    (``many.py``) then re-invert only every ``inverse_every`` updates (a batched ``lax.cond``
+    would invert on every one) and call LAPACK one matrix at a time, as a run alone does
+    (batched LAPACK calls deadlocked XLA's 2-thread CPU pool here, jaxlib 0.10.2)."""
+    return jax.custom_batching.sequential_vmap(fn)

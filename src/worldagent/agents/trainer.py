@@ -26,6 +26,22 @@ import jax
 import jax.numpy as jnp
 
 
+class Program(NamedTuple):
+    """A trainer's jitted functions with their arguments explicit, for a driver that vmaps runs (``many.py``).
+
+    Attributes:
+        init: ``init(key, consts) -> state``.
+        chunk: ``chunk(state, n, total_episodes, consts) -> (state, curve)``, ``n`` static.
+        consts: what this trainer passes as ``consts`` (env params, world distribution, ...).
+        total_episodes: i32, the episode budget.
+    """
+
+    init: Callable
+    chunk: Callable
+    consts: Any
+    total_episodes: jax.Array
+
+
 class Trainer(NamedTuple):
     """What an algorithm's ``make_train`` returns (all pure; ``train_chunk`` and ``train`` jitted).
 
@@ -37,6 +53,7 @@ class Trainer(NamedTuple):
         network: the Flax module the policy acts with.
         max_updates: updates that surely spend the budget.
         done: ``done(state) -> bool``, the episode budget is spent.
+        program: the same functions with their ``consts`` as arguments (``Program``).
     """
 
     init: Callable
@@ -45,6 +62,7 @@ class Trainer(NamedTuple):
     network: Any
     max_updates: int
     done: Callable
+    program: Program | None = None
 
 
 def raw_key(key: jax.Array) -> jax.Array:
@@ -93,4 +111,5 @@ def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budg
         network=network,
         max_updates=budget,
         done=lambda state: state.episodes >= total_episodes,
+        program=Program(init_jit, chunk, consts, total),
     )

@@ -177,6 +177,110 @@ def _check_inputs(algorithm, config, distribution, seed) -> None:
         raise WorldagentError(f"seed={seed!r}; pass a non-negative integer.")
 
 
+@dataclass
+class OpenRun:
+    """A run being trained by a host driver (``train`` here, ``many.train_many``): what it is and where it stands.
+
+    Attributes:
+        spec, algorithm, config: the env spec, the ``algorithms.Algorithm`` and its config.
+        out_dir: the run directory.
+        record: ``run.json``'s content.
+        env: the env; trainer: its ``trainer.Trainer``.
+        state: the training state (fresh, or restored from the checkpoint).
+        rows: the learning curve so far (the checkpoint's rows when resumed).
+        resumed_from: the checkpoint's update count when resumed, else None.
+        wall_offset: seconds the curve had already counted before this call.
+        chunk_updates: updates per jitted chunk, a checkpoint after each.
+    """
+
+    spec: Any
+    algorithm: Any
+    config: Any
+    out_dir: Path
+    record: dict
+    env: Any
+    trainer: Any
+    state: Any
+    rows: list[dict]
+    resumed_from: int | None
+    wall_offset: float
+    chunk_updates: int
+
+
+def _check_chunk_updates(config, chunk_updates: int | None) -> int:
+    """Updates per jitted chunk: ``chunk_updates``, or the config's (``chunk_updates``; DQN: one episode of every env)."""
+    chunk_updates = config.chunk_updates if chunk_updates is None else chunk_updates
+    if isinstance(chunk_updates, bool) or not isinstance(chunk_updates, (int, np.integer)) or chunk_updates < 1:
+        raise WorldagentError(f"chunk_updates={chunk_updates!r}; use at least 1.")
+    return int(chunk_updates)
+
+
+def open_run(
+    spec: Any,
+    algo: str,
+    config: Any,
+    distribution: Any,
+    out_dir: str | Path,
+    *,
+    seed: int,
+    options: dict | None,
+    params: Any,
+    resume: bool,
+    distribution_spec: str,
+    chunk_updates: int | None,
+) -> OpenRun:
+    """Check a run's inputs, build its trainer, start it (or restore its checkpoint) and write ``run.json`` (see ``train``)."""
+    spec, algorithm = registry.get(spec), get_algorithm(algo)
+    _check_inputs(algorithm, config, distribution, seed)
+    chunk_updates = _check_chunk_updates(config, chunk_updates)
+    options = spec.check_options(options)
+    out_dir = Path(out_dir)
+    record = _run_record(spec, algo, config, options, seed, distribution_spec)
+    checkpoint = out_dir / CHECKPOINT_FILE
+    resuming = resume and checkpoint.is_file()
+    if resuming:
+        _check_resumable(out_dir, record)
+    env, env_params = spec.make_env(options)
+    env_params = env_params if params is None else params
+    trainer = algorithm.make_train(config, env, env_params, distribution, spec.training_params)
+    state = trainer.init(jax.random.key(seed))
+    rows, resumed_from = [], None
+    if resuming:
+        state = _restore(state, checkpoint)
+        resumed_from = int(state.update)
+        rows = [r for r in _read_curve(out_dir / CURVE_FILE) if r["update"] <= resumed_from]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_bytes(out_dir / RUN_FILE, json.dumps(record, indent=1).encode())
+    offset = rows[-1]["wall_seconds"] if rows else 0.0
+    return OpenRun(spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates)
+
+
+def record_chunk(run: OpenRun, state: Any, curve: dict, elapsed: float) -> None:
+    """After a chunk: the run's new state, its curve rows (``curve``: the chunk's, on the host) and checkpoint, written."""
+    run.state = state
+    run.rows += _new_rows(curve, int(state.update), run.wall_offset + elapsed)
+    write_bytes(run.out_dir / CHECKPOINT_FILE, flax.serialization.to_bytes(jax.device_get(state)))
+    _write_curve(run.out_dir / CURVE_FILE, run.rows)
+
+
+def status(run: OpenRun) -> dict:
+    """The progress bar's fields: the plotted metrics of the run's last update."""
+    return _status(run.spec, run.rows[-1]) if run.rows else {}
+
+
+def finish_run(run: OpenRun, wall: float) -> TrainResult:
+    """Plot the curve, save the agent to ``out_dir/policy`` and say what the run produced."""
+    state, rows, seed = run.state, run.rows, run.record["seed"]
+    if rows:
+        plot_curve(rows, run.out_dir / PLOT_FILE, run.spec)
+    extra = {"seed": seed, "episodes": int(state.episodes), "env_steps": int(state.env_steps), "updates": int(state.update)}
+    extra = {**extra, "distribution": run.record["distribution"], "options": run.record["options"]}
+    agent = _save_agent(run.out_dir, run.spec, run.algorithm, run.trainer, state, run.env, run.config, extra)
+    columns = list(rows[0]) if rows else list(HOST_FIELDS)
+    curve = {k: np.array([r[k] for r in rows]) for k in columns}
+    return TrainResult(agent, run.out_dir, curve, int(state.episodes), int(state.env_steps), wall, run.resumed_from)
+
+
 def train(
     spec: Any,
     algo: str,
@@ -220,53 +324,22 @@ def train(
     Returns:
         ``TrainResult``.
     """
-    spec, algorithm = registry.get(spec), get_algorithm(algo)
-    _check_inputs(algorithm, config, distribution, seed)
-    chunk_updates = config.chunk_updates if chunk_updates is None else chunk_updates
-    if isinstance(chunk_updates, bool) or not isinstance(chunk_updates, (int, np.integer)) or chunk_updates < 1:
-        raise WorldagentError(f"chunk_updates={chunk_updates!r}; use at least 1.")
-    options = spec.check_options(options)
-    out_dir = Path(out_dir)
-    run = _run_record(spec, algo, config, options, seed, distribution_spec)
-    checkpoint = out_dir / CHECKPOINT_FILE
-    resuming = resume and checkpoint.is_file()
-    if resuming:
-        _check_resumable(out_dir, run)
-    env, env_params = spec.make_env(options)
-    env_params = env_params if params is None else params
-    trainer = algorithm.make_train(config, env, env_params, distribution, spec.training_params)
-    state = trainer.init(jax.random.key(seed))
-    rows, resumed_from = [], None
-    if resuming:
-        state = _restore(state, checkpoint)
-        resumed_from = int(state.update)
-        rows = [r for r in _read_curve(out_dir / CURVE_FILE) if r["update"] <= resumed_from]
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_bytes(out_dir / RUN_FILE, json.dumps(run, indent=1).encode())
-
-    start, offset = time.perf_counter(), rows[-1]["wall_seconds"] if rows else 0.0
-    total = int(config.episodes)
-    with progress_bar(f"training {algo} on {spec.name}", total=total, enabled=progress) as advance:
-        advance(min(int(state.episodes), total))
+    run = open_run(
+        spec, algo, config, distribution, out_dir, seed=seed, options=options, params=params, resume=resume,
+        distribution_spec=distribution_spec, chunk_updates=chunk_updates,
+    )  # fmt: skip
+    trainer, total = run.trainer, int(run.config.episodes)
+    start = time.perf_counter()
+    with progress_bar(f"training {algo} on {run.spec.name}", total=total, enabled=progress) as advance:
+        advance(min(int(run.state.episodes), total))
         chunks = 0
-        while not bool(trainer.done(state)) and (stop_after_chunks is None or chunks < stop_after_chunks):
+        while not bool(trainer.done(run.state)) and (stop_after_chunks is None or chunks < stop_after_chunks):
             chunks += 1
-            before = int(state.episodes)
-            state, curve = trainer.train_chunk(state, chunk_updates)
-            rows += _new_rows(jax.device_get(curve), int(state.update), offset + time.perf_counter() - start)
-            write_bytes(checkpoint, flax.serialization.to_bytes(jax.device_get(state)))
-            _write_curve(out_dir / CURVE_FILE, rows)
-            advance(min(int(state.episodes), total) - min(before, total), **(_status(spec, rows[-1]) if rows else {}))
-    wall = time.perf_counter() - start
-    if rows:
-        plot_curve(rows, out_dir / PLOT_FILE, spec)
-    extra = {"seed": int(seed), "episodes": int(state.episodes), "env_steps": int(state.env_steps), "updates": int(state.update)}
-    agent = _save_agent(
-        out_dir, spec, algorithm, trainer, state, env, config, {**extra, "distribution": distribution_spec, "options": run["options"]}
-    )
-    columns = list(rows[0]) if rows else list(HOST_FIELDS)
-    curve = {k: np.array([r[k] for r in rows]) for k in columns}
-    return TrainResult(agent, out_dir, curve, int(state.episodes), int(state.env_steps), wall, resumed_from)
+            before = int(run.state.episodes)
+            state, curve = trainer.train_chunk(run.state, run.chunk_updates)
+            record_chunk(run, state, jax.device_get(curve), time.perf_counter() - start)
+            advance(min(int(state.episodes), total) - min(before, total), **status(run))
+    return finish_run(run, time.perf_counter() - start)
 
 
 def _new_rows(curve: dict, update: int, elapsed: float) -> list[dict]:

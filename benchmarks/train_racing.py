@@ -1,6 +1,7 @@
 """Train racing agents at the paper's budget (10,000 episodes, §5.3) over seeds × algorithms × observations, time and evaluate them.
 
     python benchmarks/train_racing.py --algos ppo acktr --observations surroundings --seeds 0 1 2 3 4
+    python benchmarks/train_racing.py --algos acktr --seeds 0 1 2 3 4 --together   # the seeds as one program (many.train_many)
 
 Training draws each episode's world uniformly from a procedural pool of 10,000 tracks (seeds
 0..9999, the paper's dataset). Evaluation (paper §6.1.1): ``--eval-worlds`` worlds sampled from
@@ -32,6 +33,7 @@ import numpy as np  # noqa: E402
 from machine import RESULTS, describe_machine, record  # noqa: E402
 from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import LatentWorlds, world_distribution  # noqa: E402
+from worldagent.agents.many import ManyRun, train_many  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.envs.core import rollout  # noqa: E402
@@ -40,7 +42,20 @@ from worldagent.envs.racing.metrics import racing_return_bounds  # noqa: E402
 GENERATOR_DIR = Path("runs/generators/racing")
 SPEC = registry.get("racing")
 LAP_TARGET = 0.9
-KEY_FIELDS = ("algorithm", "observation", "options", "overrides", "note", "seed", "episodes_budget", "eval_worlds", "repeats", "eval_source")
+DISTRIBUTION = "generator (procedural pool of 10,000, seeds 0..9999)"
+KEY_FIELDS = (
+    "algorithm",
+    "observation",
+    "options",
+    "overrides",
+    "note",
+    "seed",
+    "episodes_budget",
+    "eval_worlds",
+    "repeats",
+    "eval_source",
+    "training",
+)
 
 
 def evaluate(policy, worlds, repeats: int, key, env, params) -> dict[str, np.ndarray]:
@@ -102,36 +117,35 @@ def result_row(algo, options, overrides, config, seed, args, trained: dict, poli
     }
 
 
-def run_one(algo: str, options: dict, seed: int, args, pool, out_root: Path) -> list[dict]:
-    """Train one agent with the host driver (checkpoints, resumable) and evaluate it; its row."""
+def run_seeds(algo: str, options: dict, args, pool, out_root: Path):
+    """Train ``args.seeds`` agents with the host driver (checkpoints, resumable), one after another or, with
+    ``--together``, as one program (``many.train_many``); evaluate each and yield its row as it is ready."""
     env, params = SPEC.make_env(options)
     overrides = args.overrides.get(algo, {})
     config = training_config(SPEC, algo, episodes=args.episodes, **overrides)
     tag = "-".join(f"{k}={v}" for k, v in sorted({**options, **overrides}.items())) + "".join(
         c if c.isalnum() else "_" for c in f"-{args.note}" if args.note
     )
-    result = train(
-        SPEC,
-        algo,
-        config,
-        pool,
-        out_root / f"{algo}-{tag}-seed{seed}-{args.episodes}",
-        seed=seed,
-        options=options,
-        progress=not args.quiet,
-        resume=not args.no_resume,
-        distribution_spec="generator (procedural pool of 10,000, seeds 0..9999)",
-    )
-    trained = {
-        "training": "host driver (training.train), one seed",
-        "train_seconds": round(result.wall_seconds, 1),
-        "resumed_from_update": result.resumed_from_update,
-        "episodes": result.episodes,
-        "env_steps": result.env_steps,
-        "env_steps_per_s": round(result.env_steps / result.wall_seconds),
-        "final_curve": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
-    }
-    return [result_row(algo, options, overrides, config, seed, args, trained, result.agent.policy, env, params, jax.random.key(args.eval_seed))]
+    out_dir = lambda seed: out_root / f"{algo}-{tag}-seed{seed}-{args.episodes}"  # noqa: E731
+    common = {"options": options, "progress": not args.quiet, "resume": not args.no_resume}
+    if args.together:
+        runs = [ManyRun(out_dir(seed), seed=seed, distribution=pool, distribution_spec=DISTRIBUTION) for seed in args.seeds]
+        results = zip(args.seeds, train_many(SPEC, algo, config, runs, max_together=args.max_together, **common))
+        how = f"many.train_many, {len(args.seeds)} seeds as one program (train_seconds: all of them)"
+    else:
+        results = ((seed, train(SPEC, algo, config, pool, out_dir(seed), seed=seed, distribution_spec=DISTRIBUTION, **common)) for seed in args.seeds)
+        how = "host driver (training.train), one seed"
+    for seed, result in results:
+        trained = {
+            "training": how,
+            "train_seconds": round(result.wall_seconds, 1),
+            "resumed_from_update": result.resumed_from_update,
+            "episodes": result.episodes,
+            "env_steps": result.env_steps,
+            "env_steps_per_s": round(result.env_steps / result.wall_seconds),
+            "final_curve": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
+        }
+        yield result_row(algo, options, overrides, config, seed, args, trained, result.agent.policy, env, params, jax.random.key(args.eval_seed))
 
 
 def summarise(runs: list[dict]) -> list[dict]:
@@ -202,6 +216,8 @@ def main() -> None:
     parser.add_argument("--name", default="train-racing", help="results file: benchmarks/results/NAME-<backend>.json")
     parser.add_argument("--out-root", type=Path, default=Path("runs/agents/train-racing"))
     parser.add_argument("--no-resume", action="store_true")
+    parser.add_argument("--together", action="store_true", help="train the seeds as one vmapped program (many.train_many)")
+    parser.add_argument("--max-together", type=int, default=None, help="with --together: seeds per program at most (default: from the device)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args()
     args.overrides = parse_overrides(args.set)
@@ -212,21 +228,16 @@ def main() -> None:
     for observation in args.observations:
         options = SPEC.parse_options([f"observation={observation}", *args.option])
         for algo in args.algos:
-            # one seed at a time through the host driver: jit(vmap(train)) over 5 seeds stalled
-            # in XLA's CPU runtime here (as in issue 5's note), using ~2% of a core for 20 minutes
-            for batch in (run_one(algo, options, seed, args, pool, args.out_root) for seed in args.seeds):
-                for run in batch:
-                    print(
-                        f"{algo} {observation} {options} {args.overrides.get(algo, {})} seed {run['seed']}: {run['episodes']:,} episodes, "
-                        f"{run['env_steps']:,} steps, {run['train_seconds']:.0f} s; eval {args.eval_worlds} x {args.repeats}: lap {run['lap_rate']:.3f}, "
-                        f"crash {run['crash_rate']:.3f}, parked {run['parked_rate']:.3f}, normalised {run['mean_return_normalised']:.3f}",
-                        flush=True,
-                    )
-                    key = [run[f] for f in KEY_FIELDS]
-                    runs = [r for r in previous_runs(args.name) if [r.get(f) for f in KEY_FIELDS] != key] + [
-                        run
-                    ]  # reread: runs in parallel add theirs
-                    path = record(args.name, {"lap_target": LAP_TARGET, "summary": summarise(runs), "runs": runs})
+            for run in run_seeds(algo, options, args, pool, args.out_root):
+                print(
+                    f"{algo} {observation} {options} {args.overrides.get(algo, {})} seed {run['seed']}: {run['episodes']:,} episodes, "
+                    f"{run['env_steps']:,} steps, {run['train_seconds']:.0f} s; eval {args.eval_worlds} x {args.repeats}: lap {run['lap_rate']:.3f}, "
+                    f"crash {run['crash_rate']:.3f}, parked {run['parked_rate']:.3f}, normalised {run['mean_return_normalised']:.3f}",
+                    flush=True,
+                )
+                key = [run[f] for f in KEY_FIELDS]
+                runs = [r for r in previous_runs(args.name) if [r.get(f) for f in KEY_FIELDS] != key] + [run]  # reread: runs in parallel add theirs
+                path = record(args.name, {"lap_target": LAP_TARGET, "summary": summarise(runs), "runs": runs})
     print(f"recorded in {path}")
 
 

@@ -17,7 +17,7 @@ from worldagent.agents.many import ManyRun, default_max_together, pad_pool, trai
 from worldagent.agents.ppo import PPOConfig
 from worldagent.envs import registry
 from worldagent.envs.harvest.env import Harvest, make_params
-from worldagent.envs.harvest.maps import generate_maps, seeds_from
+from worldagent.envs.harvest.world import HarvestMap
 from worldagent.errors import WorldagentError
 
 # A run alone and the same run vmapped with others differ in the last bits (XLA orders the batched
@@ -26,11 +26,16 @@ from worldagent.errors import WorldagentError
 # 0 (DQN); another seed's agent differs by ~0.1. The tolerance leaves room for other CPUs.
 ATOL = 1e-4
 CONFIGS = {
-    "ppo": PPOConfig(total_episodes=32, num_envs=8, num_steps=32, num_minibatches=2, update_epochs=2, hidden=(32, 32)),
-    "acktr": ACKTRConfig(total_episodes=24, num_envs=8, num_steps=8, hidden=(32, 32), inverse_every=2),
+    "ppo": PPOConfig(total_episodes=32, num_envs=8, num_steps=32, num_minibatches=2, update_epochs=1, hidden=(16,)),
+    "acktr": ACKTRConfig(total_episodes=24, num_envs=8, num_steps=8, hidden=(16,), inverse_every=2),
     "dqn": DQNConfig(num_episodes=12, num_envs=4, hidden_sizes=(16,), batch_size=16, buffer_size=400, learning_starts=40, target_update_every=10),
 }
 CHUNKS = {"ppo": 2, "acktr": 4, "dqn": 1}
+TINY_MAPS = [
+    ".........\n..AAAAA..\n..AA.AA..\n..AAAAA..\n.........",
+    ".........\n.AAA.....\n.AAA.....\n.....AAA.\n.....AAA.",
+    "AA.....AA\nAA.....AA\n.........\nAA.....AA\nAA....AAA",
+]
 
 
 @pytest.fixture(scope="module")
@@ -45,10 +50,17 @@ def envs():
     with registered() as toy:
         registry.register(small)
         try:
-            pools = {"toy": world_distribution(toy, "generator", size=8, seed=0), "many_harvest": WorldPool.create(generate_maps(seeds_from(0, 3)))}
+            pools = {
+                "toy": world_distribution(toy, "generator", size=8, seed=0),
+                "many_harvest": WorldPool.create(_stacked([HarvestMap.from_str(text) for text in TINY_MAPS])),
+            }
             yield {"ppo": toy, "acktr": toy, "dqn": small}, pools
         finally:
             registry.unregister("many_harvest")
+
+
+def _stacked(worlds: list) -> object:
+    return jax.tree_util.tree_map(lambda *x: np.stack([np.asarray(v) for v in x]), *worlds)
 
 
 def _max_difference(a, b) -> float:

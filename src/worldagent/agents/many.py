@@ -20,6 +20,11 @@ and its chunks compute the same function; XLA compiles the batched update with o
 orders, so its floats differ from the run alone in the last bits (measured in
 ``tests/agents/test_many.py`` and ``benchmarks/many_runs.py``), and those differences grow
 as training goes on. A resumed many-run continues bit-identically (the same program).
+
+Cost: under ``vmap`` a ``lax.cond`` whose predicate differs by run runs both branches. A run whose
+budget is spent keeps computing (and discarding) updates until its group is done; DQN computes
+its learning step during the replay warm-up too; K-FAC's periodic re-inversion is mapped run by
+run instead (``kfac._run_by_run``), so it stays periodic.
 """
 
 from __future__ import annotations

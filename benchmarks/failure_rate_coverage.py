@@ -39,9 +39,8 @@ CHUNK = 2000  # worlds per recorded chunk (a killed record resumes at its last c
 CACHE = Path("runs/frcoverage")
 # Agents issue 29 asks for that this study did not record, and why (written beside every result).
 NOT_RUN = {
-    "harvest-dqn": "not recorded: the quick preset's harvest DQN plays its episodes far slower than racing's PPO (harvest's scripted greedy "
-    "agent: 2.9 ms an episode against racing's 0.58), so 200,000 worlds x 8 episodes did not fit the session beside racing's 216,000 "
-    "(40 min on 2 shared cores)",
+    "harvest-dqn": "recorded 30,000 worlds, not the 200,000 asked: the quick preset's harvest DQN played 8 episodes in 74 ms a "
+    "world (10-23 worlds/s on 2 shared cores), so 200,000 would have taken 3-5 hours; its 1e-3 event holds 31 recorded worlds",
     "rays-acktr": "not recorded: the quick run trains no ACKTR agent on rays, and training one plus its brute force did not fit the session",
     "learning proposal": "issue 29 Build item 2 (a proposal that learns from the agent's failures, e.g. cross-entropy or splitting on the "
     "margin) was not built in this pass",

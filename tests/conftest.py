@@ -12,6 +12,9 @@ from pathlib import Path
 # Test programs are tiny and compiled once each: compile them fast, not well (about 17% of the
 # suite's time). Set before JAX starts its backend; a user's XLA_FLAGS win.
 os.environ.setdefault("XLA_FLAGS", "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true")
+# Tests evaluate a handful of worlds at a time: pad each evaluation call to 16 episodes, not the
+# 256 users get (any fixed size keeps results batch-invariant; test_batch_invariance checks 64).
+os.environ.setdefault("WORLDAGENT_EPISODES_PER_CALL", "16")
 
 import jax  # noqa: E402
 import pytest

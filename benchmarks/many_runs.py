@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -45,14 +46,14 @@ def measure(algo: str, mode: str, seeds: int, episodes: int, pool_size: int, out
     pool = world_distribution(env, "generator", size=pool_size, seed=0)
     config = training_config(env, algo, episodes=episodes)
     load_before = os.getloadavg()
-    start = time.perf_counter()
+    cpu_before, start = _cpu_seconds(), time.perf_counter()
     if mode == "sequential":
         results = [train(env, algo, config, pool, out / f"seed{s}", seed=s, progress=False, resume=False) for s in range(seeds)]
     else:
         results = train_many(
             env, algo, config, [ManyRun(out / f"seed{s}", seed=s, distribution=pool) for s in range(seeds)], progress=False, resume=False
         )
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, _cpu_seconds() - cpu_before
     # the first chunk of each program includes its compilation: the rest is the steady rate
     first, last = [float(r.curve["wall_seconds"][0]) for r in results], [float(r.curve["wall_seconds"][-1]) for r in results]
     steady = sum(b - a for a, b in zip(first, last)) if mode == "sequential" else max(last) - first[0]
@@ -60,12 +61,20 @@ def measure(algo: str, mode: str, seeds: int, episodes: int, pool_size: int, out
     np.savez(out / f"{mode}-params.npz", *[x for run in params for x in run])
     return {
         "wall_s": round(wall, 1),
+        "cpu_s": round(cpu, 1),
+        "cores_busy": round(cpu / wall, 2),
         "after_first_chunk_s": round(steady, 1),
         "episodes": [r.episodes for r in results],
         "env_steps": sum(r.env_steps for r in results),
         "load_before": [round(x, 2) for x in load_before],
         "load_after": [round(x, 2) for x in os.getloadavg()],
     }
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU seconds of this process so far (all its threads)."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 
 
 def run_child(algo: str, mode: str, seeds: int, episodes: int, pool_size: int, out: Path) -> dict:
@@ -121,7 +130,8 @@ def write(args, rows: list[dict]) -> Path:
             "Each measurement a fresh process (compilation included, imports and pool building excluded); sequential = training.train per seed, "
             "together = many.train_many (one vmapped program). The machine was shared with another worker's benchmark: load averages "
             "(1, 5, 15 min) are recorded before and after each measurement, and the timings are noisy. after_first_chunk_s: the training "
-            "time less each program's first chunk (which includes its compilation; sequential runs compile once, in their first run)."
+            "time less each program's first chunk (which includes its compilation; sequential runs compile once, in their first run). "
+            "cores_busy: CPU seconds / wall seconds of the training calls (2 = both cores busy)."
         ),
         "pool": f"procedural, {args.pool} worlds, seeds 0..{args.pool - 1}",
         "runs": rows,

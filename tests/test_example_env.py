@@ -29,6 +29,7 @@ def test_the_example_env_is_registered_through_its_entry_point_only():
     assert "lavagrid" not in registry.BUILTIN
 
 
+@pytest.mark.example  # its own step in .ci/run, outside the default run's 5 minutes
 def test_reproduce_tiny_runs_every_phase_on_the_example_env(tmp_path):
     result = CliRunner().invoke(app, ["reproduce", "--preset", "tiny", "--env", "lavagrid", "--out", str(tmp_path), "--quiet"])
     assert result.exit_code == 0, result.output

@@ -99,7 +99,11 @@ def trained(envs, tmp_path_factory):
     return get
 
 
-@pytest.mark.parametrize("algo", ["ppo", "acktr", "dqn"])
+# PPO in the default run; ACKTR and DQN (another 40 s) with -m slow, to keep the default run under 5 minutes.
+SLOW = pytest.mark.slow
+
+
+@pytest.mark.parametrize("algo", ["ppo", pytest.param("acktr", marks=SLOW), pytest.param("dqn", marks=SLOW)])
 def test_runs_together_give_the_agents_of_runs_alone(algo, trained):
     alone, together = trained(algo)
     assert len({r.wall_seconds for r in together}) == 1  # one program: the arms' pools were padded to one shape
@@ -114,7 +118,7 @@ def test_runs_together_give_the_agents_of_runs_alone(algo, trained):
     assert _max_difference(together[0].agent.params, together[1].agent.params) > 100 * ATOL  # the two runs differ far beyond the tolerance
 
 
-@pytest.mark.parametrize("algo", ["ppo", "dqn"])
+@pytest.mark.parametrize("algo", ["ppo", pytest.param("dqn", marks=SLOW)])
 def test_a_killed_many_run_resumes_identically(algo, envs, trained, tmp_path):
     specs, pools = envs
     _, whole = trained(algo)

@@ -33,3 +33,20 @@ def device() -> str:
     import jax
 
     return ", ".join(f"{d} ({d.device_kind})" for d in jax.devices())
+
+
+def fingerprint(tree, name: str = "") -> str:
+    """Short SHA-256 of a pytree's leaves (shapes, dtypes, bytes) and a name: which agent / G made a cache."""
+    import hashlib
+
+    import jax
+    import numpy as np
+
+    digest = hashlib.sha256(name.encode())
+    for leaf in jax.tree_util.tree_leaves(tree):
+        if hasattr(leaf, "dtype") and jax.dtypes.issubdtype(leaf.dtype, jax.dtypes.prng_key):
+            leaf = jax.random.key_data(leaf)
+        array = np.asarray(leaf)
+        digest.update(f"{array.shape}{array.dtype}".encode())
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()[:16]

@@ -140,8 +140,8 @@ def estimate_campaign(store, setup, selection, method: str, *, worlds: int, impo
     """
     from worldagent.agents.policy import agent_record
     from worldagent.analysis.surrogate import distinct_describer, pool_cache
-    from worldagent.influence.cache import fingerprint
     from worldagent.progress import progress_bar
+    from worldagent.provenance import fingerprint
     from worldagent.search.objectives import LatentObjective, Objective
 
     searched = importance.pilot if importance.proposal == "surrogate" else importance.max_rounds * importance.round_worlds

@@ -13,33 +13,20 @@ run directory and a rerun skips finished work. The cache is only reused for the 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
 
-import jax
 import numpy as np
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.files import write_atomically, write_text
+from worldagent.provenance import fingerprint  # noqa: F401  (campaign and influence caches share it)
 
 PLAN_FILE = "plan.json"
 WORLDS_FILE = "influenced_worlds.npz"
 TRAINED_FILE = "trained.json"
-
-
-def fingerprint(tree: Any, name: str = "") -> str:
-    """Short SHA-256 of a pytree's leaves (shapes, dtypes, bytes) and a name: which agent / G made the cache."""
-    digest = hashlib.sha256(name.encode())
-    for leaf in jax.tree_util.tree_leaves(tree):
-        if hasattr(leaf, "dtype") and jax.dtypes.issubdtype(leaf.dtype, jax.dtypes.prng_key):
-            leaf = jax.random.key_data(leaf)
-        array = np.asarray(leaf)
-        digest.update(f"{array.shape}{array.dtype}".encode())
-        digest.update(np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()[:16]
 
 
 def config_dict(config: Any) -> dict:

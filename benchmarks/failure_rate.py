@@ -49,8 +49,8 @@ from worldagent import experiments  # noqa: E402
 from worldagent.analysis import failure_rate as fr  # noqa: E402
 from worldagent.analysis.surrogate import distinct_describer  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
+from worldagent.events import parse_selection  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
-from worldagent.influence.selection import parse_selection  # noqa: E402
 from worldagent.worlds.dataset import make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator  # noqa: E402
 from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402

@@ -216,7 +216,7 @@ def replay(args) -> None:
     from worldagent.analysis import failure_rate as fr
     from worldagent.analysis import pooled
     from worldagent.analysis.pooled import monte_carlo_worlds
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
 
     setup = load_setup(args.run, args.env, args.agent, args.repeats)
     record = load_record(record_path(args.env, args.name, setup), setup)

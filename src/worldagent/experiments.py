@@ -518,7 +518,7 @@ def failure_selection(text: str | None, env: str) -> Any:
     """The parsed failure event, or None."""
     if text is None:
         return None
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
 
     return parse_selection(text, env)
 
@@ -610,7 +610,7 @@ def failure_rate(
 
     Args:
         store: the run store; ``setup``: env, agents, generator, repeats, backend.
-        event: a selection such as ``"crash_rate > 0.5"`` (``influence.selection``).
+        event: a selection such as ``"crash_rate > 0.5"`` (``worldagent.events``).
         method: "mc", "is" or "both".
         worlds: Monte Carlo's worlds, and importance sampling's worlds after its search (at most,
             with ``target_width``).
@@ -624,7 +624,7 @@ def failure_rate(
     """
     from worldagent.analysis import failure_rate as fr
     from worldagent.analysis import stored
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
 
     importance = importance or fr.ImportanceConfig()
     fr.check_budget(worlds, target_width, importance)

@@ -16,7 +16,7 @@ from worldagent.analysis.stored import failure_names, read_estimate
 from worldagent.cli import app
 from worldagent.commands.failure_rate import estimate_line
 from worldagent.errors import WorldagentError
-from worldagent.influence.selection import parse_selection
+from worldagent.events import parse_selection
 from worldagent.store import RunStore
 
 THRESHOLD = 3.0

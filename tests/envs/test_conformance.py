@@ -292,7 +292,7 @@ def test_declared_algorithms_pictures_and_presets(case):
     assert image.size == (48, 48)
     assert all(isinstance(budgets, dict) or hasattr(budgets, "keys") for budgets in case.spec.presets.values())
     if case.spec.selection:
-        from worldagent.influence.selection import parse_selection
+        from worldagent.events import parse_selection
 
         parse_selection(case.spec.selection, case.spec.name)
 
@@ -345,7 +345,7 @@ def test_episode_pictures_draw_episodes(case, jitted, played):
 
 def test_failure_and_training_check_are_usable(case, jitted, played):
     """``failure`` parses as a selection; ``training_check`` reads mean metrics and returns text."""
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
 
     if case.spec.failure:
         parse_selection(case.spec.failure, case.spec.name)

@@ -84,7 +84,7 @@ def read_estimate(store, name: str) -> fr.Estimate:
         WorldagentError: when ``name`` is no failure-rate campaign, or is unfinished (rerun
             ``worldagent failure-rate`` with the same settings to finish it).
     """
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
 
     campaign = store.campaign(name)
     if campaign is None or name not in failure_names(store):

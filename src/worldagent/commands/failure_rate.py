@@ -26,7 +26,7 @@ from worldagent.commands.options import (
 
 EVENT_HELP = (
     "The event: METRIC OP NUMBER joined by 'and', on per-world means over the episodes, "
-    "e.g. 'crash_rate > 0.5' or 'return < 200' (the influence selection grammar)."
+    "e.g. 'crash_rate > 0.5' or 'return < 200' (the event language, worldagent.events)."
 )
 
 
@@ -103,7 +103,7 @@ def register(app: typer.Typer) -> None:
         """The probability of an event (a failure) for worlds z ~ N(0, I), with a 95% interval and the episodes spent."""
         from worldagent import experiments
         from worldagent.analysis.failure_rate import check_budget, methods
-        from worldagent.influence.selection import parse_selection
+        from worldagent.events import parse_selection
         from worldagent.store import RunStore
 
         counts = dict(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components, pilot=pilot)

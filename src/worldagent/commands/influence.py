@@ -95,7 +95,7 @@ def influence_command(
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.agents.algorithms import parse_settings, training_config
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
 
     selection = parse_selection(select, env)  # before anything slow: a typo costs nothing
     algo = algorithm(env, algo)

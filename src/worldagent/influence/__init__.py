@@ -5,9 +5,9 @@ experiment end to end, cached in a run directory (``experiments.influence`` is t
 point); ``reports.influence.influence_figure`` draws Figure 8.
 """
 
+from worldagent.events import Clause, Selection, parse_selection
 from worldagent.influence.cache import load_influenced_worlds
 from worldagent.influence.experiment import influence
-from worldagent.influence.selection import Clause, Selection, parse_selection
 from worldagent.influence.worlds import select_worlds
 
 __all__ = ["Clause", "Selection", "influence", "load_influenced_worlds", "parse_selection", "select_worlds"]

@@ -32,9 +32,9 @@ import numpy as np
 
 from worldagent.agents.policy import agent_record
 from worldagent.errors import WorldagentError
+from worldagent.events import Selection
 from worldagent.files import write_text
 from worldagent.influence.cache import PLAN_FILE, TRAINED_FILE, WORLDS_FILE, check_plan, config_dict, fingerprint, save_influenced_worlds
-from worldagent.influence.selection import Selection
 from worldagent.influence.statistics import episode_values, json_safe, rounded, summarise
 from worldagent.influence.worlds import resolved, search_direction, search_target, select_worlds
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.influence.selection import Selection, parse_selection
+from worldagent.events import Selection, parse_selection
 
 
 def resolved(selection: Selection | str, env) -> Selection:

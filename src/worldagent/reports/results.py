@@ -148,7 +148,7 @@ def atlas_results(spec, store, outputs: dict) -> dict:
     from worldagent.analysis.explanations import clusters
     from worldagent.analysis.stored import campaign_name, read_estimate
     from worldagent.errors import WorldagentError
-    from worldagent.influence.selection import parse_selection
+    from worldagent.events import parse_selection
     from worldagent.search.atlas import distinct_count, qd_offset, read_atlas
 
     atlas = read_atlas(store, outputs["campaign"])

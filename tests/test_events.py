@@ -7,7 +7,7 @@ import pytest
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.influence.selection import parse_selection
+from worldagent.events import parse_selection
 from worldagent.influence.worlds import search_direction, select_worlds
 from worldagent.store import Evaluation, RunStore
 

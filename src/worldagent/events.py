@@ -1,4 +1,8 @@
-"""Selections: which evaluated worlds have the property we want to train on (paper §6.2).
+"""The event language: which evaluated worlds have a property (paper §6.2), shared by every command.
+
+``--select`` (influence), ``--event`` (failure-rate), ``--failure`` and ``--target`` (curricula)
+all read their text here. It lives beside the registry, below search, analysis, training and
+influence, so that none of them imports another to read an event.
 
 The paper forms its influenced training distributions from worlds with a property: racing
 worlds where the agent is likely to crash ("crash rate > 0.5", §6.2.1), harvest worlds where

@@ -317,6 +317,18 @@ class RunStore:
                 decode_world(world) if world is not None else None,
             )
 
+    def world(self, campaign: str, generation: int, slot: int) -> dict[str, np.ndarray]:
+        """The stored world of one evaluation (without decoding the rest of its campaign's)."""
+        row = self.db.execute(
+            "SELECT e.world FROM evaluations e JOIN campaigns c ON c.id = e.campaign_id WHERE c.name=? AND e.generation=? AND e.slot=?",
+            (campaign, int(generation), int(slot)),
+        ).fetchone()
+        if row is None or row[0] is None:
+            raise WorldagentError(
+                f"{self.path} holds no world for campaign {campaign!r} generation {generation} slot {slot}; pick a stored evaluation."
+            )
+        return decode_world(row[0])
+
     def export_csv(self, out: Path | str, campaign: str | None = None) -> Path:
         """One row per evaluation: campaign, generation, slot, score, mean of each metric, latent."""
         from worldagent.files import write_text

@@ -3,7 +3,7 @@
 ``build_report(run_dir)`` reads ``manifest.json`` and, for every environment the run names,
 the numbers ``results.env_results`` recomputes from its run store, the generator's
 ``quality.json``, the agents' learning curves and ``influence.json`` (where each lives:
-``reproduce.layout.RunLayout``), and writes ``run_dir/report.html``: inline CSS, every figure a
+``runs.RunLayout``, read through ``runs.Run``), and writes ``run_dir/report.html``: inline CSS, every figure a
 base64 PNG. Each headline number is printed next to the paper's value (``spec.paper``) and
 carries ``data-key`` / ``data-value`` attributes so tests and scripts can read it back exactly.
 Figures that are pure functions of the store (Figures 6a and 7) are redrawn here; those that
@@ -18,10 +18,10 @@ import json
 from pathlib import Path
 
 from worldagent.envs import registry
-from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.reports.page import CSS, esc, fmt, image, missing, number, phase_state, section, table
 from worldagent.reports.results import Headline, env_results, headlines
+from worldagent.runs import Run
 
 REPORT_FILE = "report.html"
 SECTIONS = (
@@ -360,14 +360,9 @@ def build_report(run_dir: Path | str) -> Path:
     Returns:
         The report's path.
     """
-    from worldagent.reproduce.manifest import Manifest
-
-    run_dir = Path(run_dir)
-    manifest = Manifest.read(run_dir).data
-    envs = [env for env in manifest.get("envs", []) if env in registry.names()]
-    if not envs:
-        raise WorldagentError(f"{run_dir}/manifest.json names no environment; run `worldagent reproduce --out {run_dir}` first.")
-    results = {env: env_results(run_dir, env, manifest) for env in envs}
+    run = Run.open(run_dir)
+    run_dir, manifest, envs = run.run_dir, run.manifest, run.require_envs()
+    results = {env: env_results(run, env) for env in envs}
     bodies = {
         "overview": overview(manifest, run_dir),
         "generator": generator_section(run_dir, results),

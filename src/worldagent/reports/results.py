@@ -9,16 +9,13 @@ mean stays below).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from worldagent.envs import registry
-from worldagent.reproduce.layout import RunLayout
-from worldagent.reproduce.presets import PHASES
+from worldagent.runs import Run
 
 
 @dataclass(frozen=True)
@@ -80,24 +77,18 @@ def world_summary(spec, evaluation, scale: Scale) -> dict:
     }
 
 
-def env_results(run_dir: Path, env: str, manifest: dict) -> dict:
-    """Everything the report shows about one environment, recomputed from the run store."""
-    from worldagent.store import RunStore
-
-    spec, layout = registry.get(env), RunLayout(Path(run_dir), env)
-    phases = manifest.get("phases", {})
-    done = {name: phases.get(f"{env}/{name}", {}) for name in PHASES}
-    results: dict[str, Any] = {"phases": done, "metric": spec.metrics.main, "layout": layout}
-    if layout.store_path.exists():
-        with RunStore(layout.store_path, create=False) as store:
+def env_results(run: Run, env: str) -> dict:
+    """Everything the report shows about one environment, recomputed from what ``run`` reads."""
+    spec, done = registry.get(env), run.phases(env)
+    results: dict[str, Any] = {"phases": done, "metric": spec.metrics.main, "layout": run.layout(env)}
+    if run.has_store(env):
+        with run.store(env) as store:
             results.update(store_results(spec, store, done))
-    if done["atlas"].get("status") == "done" and "campaign" in done["atlas"].get("outputs", {}) and layout.store_path.exists():
-        with RunStore(layout.store_path, create=False) as store:
-            results["atlas"] = atlas_results(spec, store, done["atlas"]["outputs"])
-    if done["influence"].get("status") == "done" and layout.influence_result.is_file():
-        results["influence"] = json.loads(layout.influence_result.read_text())
-    if layout.quality_path.is_file():
-        results["quality"] = json.loads(layout.quality_path.read_text())
+            if "campaign" in run.outputs(env, "atlas"):
+                results["atlas"] = atlas_results(spec, store, done["atlas"]["outputs"])
+    for name, found in (("influence", run.influence(env)), ("quality", run.quality(env))):
+        if found is not None:
+            results[name] = found
     return results
 
 

@@ -24,9 +24,8 @@ from typing import Any
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.provenance import device, versions
-
-MANIFEST_FILE = "manifest.json"
-FORMAT_VERSION = 1
+from worldagent.runs import MANIFEST_FILE, parse_manifest, read_manifest
+from worldagent.runs import MANIFEST_FORMAT as FORMAT_VERSION
 
 
 def phase_key(env: str | None, phase: str) -> str:
@@ -54,20 +53,12 @@ class Manifest:
         path = run_dir / MANIFEST_FILE
         if not path.exists():
             return cls(run_dir, {"format_version": FORMAT_VERSION, "created": time.time(), "phases": {}})
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError):
-            raise WorldagentError(f"{path} is not readable JSON; delete it to start the run afresh, or pick another --out.") from None
-        if not isinstance(data, dict) or data.get("format_version") != FORMAT_VERSION or not isinstance(data.get("phases"), dict):
-            raise WorldagentError(f"{path} is not a worldagent reproduce manifest (format {FORMAT_VERSION}); pick another --out.")
-        return cls(run_dir, data)
+        return cls(run_dir, parse_manifest(path))
 
     @classmethod
     def read(cls, run_dir: Path | str) -> Manifest:
-        """The manifest of an existing run directory (for reports); refuses a directory without one."""
-        if not (Path(run_dir) / MANIFEST_FILE).is_file():
-            raise WorldagentError(f"{run_dir} has no {MANIFEST_FILE}; run `worldagent reproduce --out {run_dir}` first.")
-        return cls.open(run_dir)
+        """The manifest of an existing run directory; refuses a directory without one (``runs.read_manifest``)."""
+        return cls(Path(run_dir), read_manifest(run_dir))
 
     def save(self) -> Path:
         self.data["updated"] = time.time()

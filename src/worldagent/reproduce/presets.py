@@ -29,8 +29,8 @@ from typing import Any
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
+from worldagent.runs import PHASES  # the phases a run directory records (runs.py reads them too)
 
-PHASES = ("dataset", "generator", "agent", "random", "strategic", "compare", "influence", "atlas")
 OPTIONAL_BUDGETS = (
     "compare_budget",
     "bo_budget",

@@ -1,0 +1,224 @@
+"""One reader of a ``worldagent reproduce`` run directory, for the HTML report and the explorer.
+
+A run directory holds ``manifest.json`` (the preset, versions, and every phase's status, config
+and outputs; ``reproduce/manifest.py`` writes it) and, per environment, what its phases wrote::
+
+    <run>/<env>/
+        dataset.npz            the procedurally generated worlds (paper §5.2.1)
+        generator/             the VAE and G(z) (quality.json: its quality figures)
+        agent/                 the training run (checkpoint, curve.csv/png, the saved agent in policy/)
+        store.sqlite           random / strategic (min, max) / comparison / atlas / failure-rate campaigns
+        influence/             the influencing experiment (influence.json, its agents)
+        figures/               figures drawn by phases (strategic.png, comparison.png, influence.png, atlas.png, ...)
+
+``RunLayout`` says where each of those lives; ``Run`` reads them: the manifest, each phase's
+record, the store's evaluations and worlds, the generator and the agent. It sits below
+``reproduce/`` (which writes runs), ``reports/`` and ``explore/`` (which read them), so neither
+reader imports the writer. It never writes.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from worldagent.errors import WorldagentError
+
+PHASES = ("dataset", "generator", "agent", "random", "strategic", "compare", "influence", "atlas")
+MANIFEST_FILE = "manifest.json"
+MANIFEST_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class RunLayout:
+    """The paths of one environment's part of a run directory.
+
+    Attributes:
+        run_dir: the run directory.
+        env: the registered environment's name.
+    """
+
+    run_dir: Path
+    env: str
+
+    @property
+    def dir(self) -> Path:
+        return Path(self.run_dir) / self.env
+
+    @property
+    def dataset_path(self) -> Path:
+        return self.dir / "dataset.npz"
+
+    @property
+    def generator_dir(self) -> Path:
+        return self.dir / "generator"
+
+    @property
+    def quality_path(self) -> Path:
+        return self.generator_dir / "quality.json"
+
+    @property
+    def agent_dir(self) -> Path:
+        return self.dir / "agent"
+
+    @property
+    def store_path(self) -> Path:
+        return self.dir / "store.sqlite"
+
+    @property
+    def influence_dir(self) -> Path:
+        return self.dir / "influence"
+
+    @property
+    def influence_result(self) -> Path:
+        return self.influence_dir / "influence.json"
+
+    @property
+    def figures(self) -> Path:
+        return self.dir / "figures"
+
+    def figure(self, name: str) -> Path:
+        """``figures/<name>.png`` (traversals, random, strategic, comparison, influence)."""
+        return self.figures / f"{name}.png"
+
+    def rel(self, path: Path) -> str:
+        """``path`` relative to the run directory (the run directory may be moved)."""
+        return str(Path(path).relative_to(self.run_dir))
+
+    def phase_outputs(self) -> dict[str, list[Path]]:
+        """The files and folders each phase writes (removed when ``--restart`` redoes it)."""
+        return {
+            "dataset": [self.dataset_path],
+            "generator": [self.generator_dir, self.figure("generator_traversals")],
+            "agent": [self.agent_dir],
+            "strategic": [self.figure("strategic")],
+            "compare": [self.figure("comparison")],
+            "influence": [self.influence_dir, self.figure("influence")],
+            "atlas": [self.figure("atlas"), self.figure("atlas_counterfactuals")],
+        }
+
+
+def parse_manifest(path: Path) -> dict:
+    """The checked contents of a ``manifest.json`` file; one-line errors for unreadable or foreign files."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        raise WorldagentError(f"{path} is not readable JSON; delete it to start the run afresh, or pick another --out.") from None
+    if not isinstance(data, dict) or data.get("format_version") != MANIFEST_FORMAT or not isinstance(data.get("phases"), dict):
+        raise WorldagentError(f"{path} is not a worldagent reproduce manifest (format {MANIFEST_FORMAT}); pick another --out.")
+    return data
+
+
+def read_manifest(run_dir: Path | str) -> dict:
+    """The manifest of an existing run directory; refuses a directory without one."""
+    path = Path(run_dir) / MANIFEST_FILE
+    if not path.is_file():
+        raise WorldagentError(f"{run_dir} has no {MANIFEST_FILE}; run `worldagent reproduce --out {run_dir}` first.")
+    return parse_manifest(path)
+
+
+def read_json(path: Path) -> dict | None:
+    """A JSON file's contents, None when it is absent."""
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+@dataclass(frozen=True)
+class Run:
+    """A run directory as its readers see it (``Run.open``).
+
+    Attributes:
+        run_dir: the run directory.
+        manifest: its ``manifest.json``.
+    """
+
+    run_dir: Path
+    manifest: dict
+
+    @classmethod
+    def open(cls, run_dir: Path | str) -> Run:
+        """Read ``run_dir``'s manifest (refused without one)."""
+        return cls(Path(run_dir), read_manifest(run_dir))
+
+    @property
+    def envs(self) -> list[str]:
+        """The registered environments the run names, in the order they ran."""
+        from worldagent.envs import registry
+
+        return [env for env in self.manifest.get("envs", []) if env in registry.names()]
+
+    def require_envs(self) -> list[str]:
+        """``envs``, refusing a run that names none."""
+        if not self.envs:
+            raise WorldagentError(f"{self.run_dir}/{MANIFEST_FILE} names no environment; run `worldagent reproduce --out {self.run_dir}` first.")
+        return self.envs
+
+    def layout(self, env: str) -> RunLayout:
+        return RunLayout(self.run_dir, env)
+
+    # -- phases ---------------------------------------------------------------------------------
+
+    def phases(self, env: str) -> dict[str, dict]:
+        """{phase: its manifest record ({} when it never ran)} for every phase of ``PHASES``."""
+        recorded = self.manifest.get("phases", {})
+        return {name: recorded.get(f"{env}/{name}", {}) for name in PHASES}
+
+    def done(self, env: str, phase: str) -> bool:
+        return self.phases(env)[phase].get("status") == "done"
+
+    def outputs(self, env: str, phase: str) -> dict:
+        """What a finished phase recorded ({} when it has not finished)."""
+        entry = self.phases(env)[phase]
+        return entry.get("outputs", {}) if entry.get("status") == "done" else {}
+
+    # -- files ----------------------------------------------------------------------------------
+
+    def quality(self, env: str) -> dict | None:
+        """The generator's ``quality.json``."""
+        return read_json(self.layout(env).quality_path)
+
+    def influence(self, env: str) -> dict | None:
+        """``influence.json`` of a finished influence phase."""
+        return read_json(self.layout(env).influence_result) if self.done(env, "influence") else None
+
+    def has_store(self, env: str) -> bool:
+        return self.layout(env).store_path.exists()
+
+    def store(self, env: str):
+        """The environment's ``RunStore`` (a context manager; refused when there is none)."""
+        from worldagent.store import RunStore
+
+        return RunStore(self.layout(env).store_path, create=False)
+
+    def evaluations(self, env: str) -> list:
+        """Every evaluation of the environment's store (without worlds), campaign by campaign."""
+        if not self.has_store(env):
+            return []
+        with self.store(env) as store:
+            return store.evaluations()
+
+    def world(self, env: str, campaign: str, generation: int, slot: int) -> Any:
+        """The stored world of one evaluation, as the env's world type (unbatched)."""
+        from worldagent.envs import registry
+
+        with self.store(env) as store:
+            arrays = store.world(campaign, generation, slot)
+        return registry.get(env).world_from_arrays(arrays)
+
+    def generator(self, env: str):
+        """G(z) of the run (``worlds.generator.Generator``), with the run's dataset."""
+        from worldagent.worlds.generator import load_generator
+
+        layout = self.layout(env)
+        return load_generator(layout.generator_dir, layout.dataset_path)[0]
+
+    def agent_path(self, env: str) -> Path:
+        """The trained agent's directory (refused before the agent phase finished)."""
+        if not self.done(env, "agent"):
+            raise WorldagentError(f"{self.run_dir} has no trained {env} agent yet; run `worldagent reproduce --out {self.run_dir}` to finish it.")
+        return self.layout(env).agent_dir
+
+    def agent_options(self, env: str) -> dict:
+        """The env options the run's agent was trained with (as the agent phase recorded them)."""
+        return dict(self.outputs(env, "agent").get("options") or {})

@@ -18,6 +18,10 @@ closed-form toy (event ``z[0] > 3``) tests them without any environment:
     mass, and each stratum is sampled as much as the mass it may hold asks. After the pilot it
     predicts its gain over Monte Carlo (episodes and seconds, describing the pool included) and
     falls back to Monte Carlo below 1.5x. Its interval counts a stratum with no hit yet.
+  - ``learned`` (``analysis.learned``): the surrogate's pool and pilot, then rounds in the
+    cross-entropy method's manner: each raises a level on the event's margin, draws the pool's
+    strata toward it and refits the model on the worlds played (worlds with identical descriptors,
+    one repaired-to world, share what is learned). Only the final draws enter the estimate.
   - ``search`` (``analysis.cross_entropy``): a cross-entropy search for a mixture of shifted
     priors, then kernels around the event worlds found, mixed with the prior.
 
@@ -39,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from worldagent.analysis import pooled
+from worldagent.analysis import learned, pooled, surrogate
 from worldagent.analysis.intervals import (  # noqa: F401  (the interval functions are part of this module's interface)
     bounded,
     check_confidence,
@@ -53,10 +57,11 @@ from worldagent.errors import WorldagentError
 from worldagent.search.campaign import evaluation_seed
 
 METHODS = ("mc", "is")
-PROPOSALS = ("search", "surrogate")
+PROPOSALS = ("search", "surrogate", "learned")
+POOLED = ("surrogate", "learned")  # the proposals drawing from a described pool of prior worlds (``analysis.pooled``)
 BATCH = 1000  # worlds per call of evaluate (a generation of the store campaign)
 MC_STREAM, IS_STREAM = 2, 3  # latent streams default_rng([seed, stream]): not random search's (1)
-POOL_LATENTS, POOL_DRAWS, FALLBACK_DRAWS = 1, 2, 3  # the surrogate's sub-streams of IS_STREAM
+POOL_LATENTS, POOL_DRAWS, FALLBACK_DRAWS, LEARN_DRAWS = 1, 2, 3, 4  # the surrogate's sub-streams of IS_STREAM
 MIN_HITS = 10  # events seen before a target width may stop the search's sampling (the intervals are poor below)
 MAX_WORLDS = 10_000_000  # worlds (or a pool) larger than this are refused before any work: a typo, not a budget
 
@@ -147,9 +152,11 @@ class ImportanceConfig:
             keep the search's mixture of shifted priors).
         wide_share: the search's mixture's share of g beside the kernels: it keeps sampling around
             the regions the search found, where kernels may not reach yet.
-        proposal: "search" (``analysis.cross_entropy``) or "surrogate" (``analysis.pooled``): a
+        proposal: "search" (``analysis.cross_entropy``), "surrogate" (``analysis.pooled``): a
             pool of prior worlds, ``pilot`` of them evaluated, the rest stratified by a model of
-            their descriptors (``round_worlds`` to ``wide_share`` then unused).
+            their descriptors (``round_worlds`` to ``wide_share`` then unused), or "learned"
+            (``analysis.learned``): the surrogate's pool and pilot, then rounds that refit the model
+            on the worlds played, each toward the last one's near-misses.
         pool: the surrogate's pool of described prior worlds (None: as many as ``pool_seconds`` of
             describing buy, timed on a sample, at most ``pooled.DEFAULT_POOL``).
         pool_seconds: the time budget for describing the pool when ``pool`` is None.
@@ -320,7 +327,7 @@ def importance_sampling(
     """
     check_budget(worlds, target_width, config, dim=dim, batch=batch, confidence=confidence)
     started = time.perf_counter()
-    if config.proposal == "surrogate":
+    if config.proposal in POOLED:
         found = surrogate_sampling(
             evaluate, dim, worlds, config=config, seed=seed, batch=batch, confidence=confidence, target_width=target_width,
             describe=describe, timing=timing, say=say, prior=prior,
@@ -387,11 +394,9 @@ def surrogate_sampling(
         timing.get("described", sample),
         confidence,
     )
-    if plan.fallback:
-        say(f"{plan.fallback}: Monte Carlo instead, starting from the pilot's {config.pilot:,} prior worlds.")
-        rng = np.random.default_rng([seed, IS_STREAM, FALLBACK_DRAWS])
-        found = sample_prior(spend, rng, dim, config.pilot + worlds, batch, confidence, target_width, seen, prior)
-        return Estimate(**{**asdict(found), "search_worlds": 0, "fallback": plan.fallback, "plan": plan.as_dict()})
+    learning = config.proposal == "learned" and learned.worth_learning(strata.probability, target_width, worlds, config.pilot, confidence)
+    if plan.fallback and not learning:
+        return _fall_back(spend, plan, config, dim, worlds, batch, confidence, target_width, seen, prior, seed, say)
     if size > sample:
         minutes = plan.describe_total / 60
         say(
@@ -399,7 +404,23 @@ def surrogate_sampling(
         )
         pool = np.concatenate([pool, prior(pool_rng, size - sample, dim)])
         described = None if describe is None else describe(pool)
-    strata = pooled.stratify(pooled.pool_chances(pool, described, sample, margins))
+    features = surrogate.features(pool, described, reference=sample)
+    if learning:
+        rounds = f"{learned.STAGES} rounds of {round(config.pilot * learned.STAGE_SHARE):,} worlds"
+        say(f"learning the proposal from the pilot's margins: {rounds}, each toward the last one's near-misses.")
+        learn_rng = np.random.default_rng([seed, IS_STREAM, LEARN_DRAWS])
+        labels = learned.cells(described, size)
+        model, probability = learned.learn(spend, learn_rng, pool, features, labels, margins, seen, batch)
+        strata = model.strata(probability)
+        plan = pooled.plan(
+            strata, size, spend.worlds, worlds, target_width, timing["episode_seconds"], timing["describe_seconds"],
+            timing.get("described", sample), confidence,
+        )  # fmt: skip
+        if plan.fallback:
+            return _fall_back(spend, plan, config, dim, worlds, batch, confidence, target_width, seen, prior, seed, say)
+    else:
+        strata = pooled.stratify(surrogate.log_chances(features, features[: config.pilot], margins))
+    learned_worlds = spend.worlds
     counts = pooled.draws_per_stratum(plan.draws, pooled.allocation(strata))
     drawn = pooled.stratified_draws(np.random.default_rng([seed, IS_STREAM, POOL_DRAWS]), strata, counts)
     event = np.concatenate([spend(pool[drawn[start : start + batch]]).event for start in range(0, len(drawn), batch)])
@@ -407,7 +428,7 @@ def surrogate_sampling(
     hits = np.bincount(stratum[event], minlength=len(counts))
     estimate, low, high, event_ess = pooled.stratified_estimate(hits, counts, strata.masses, size, confidence)
     found = Estimate(
-        "is", estimate, low, high, spend.worlds, spend.episodes, int(event.sum()), confidence, config.pilot,
+        "is", estimate, low, high, spend.worlds, spend.episodes, int(event.sum()), confidence, learned_worlds,
         effective_sample_size((strata.masses / counts)[stratum]), event_ess, plan=plan.as_dict(),
     )  # fmt: skip
     if target_width is not None and found.relative_half_width > target_width:
@@ -415,6 +436,19 @@ def surrogate_sampling(
         note = f"reached ±{found.relative_half_width:.0%}, short of ±{target_width:.0%}, after the {plan.draws:,} draws of {why}"
         found = Estimate(**{**asdict(found), "note": note, "plan": plan.as_dict()})
     return found
+
+
+def _fall_back(
+    spend: Spender, plan: pooled.Plan, config: ImportanceConfig, dim: int, worlds: int, batch: int, confidence: float, target_width: float | None,
+    seen: np.ndarray, prior: Prior, seed: int, say: Say,
+) -> Estimate:  # fmt: skip
+    """Monte Carlo from the pilot's prior worlds when the plan says importance sampling does not pay; worlds a learned
+    proposal's rounds spent are counted (they are no prior draws, so not in the estimate)."""
+    say(f"{plan.fallback}: Monte Carlo instead, starting from the pilot's {config.pilot:,} prior worlds.")
+    spent = spend.worlds - config.pilot
+    rng = np.random.default_rng([seed, IS_STREAM, FALLBACK_DRAWS])
+    found = sample_prior(spend, rng, dim, config.pilot + worlds, batch, confidence, target_width, seen, prior)
+    return Estimate(**{**asdict(found), "worlds": found.worlds + spent, "search_worlds": spent, "fallback": plan.fallback, "plan": plan.as_dict()})
 
 
 def _timing(timing: Mapping | None, describe: Any, episode_seconds: float, describe_seconds: float, sample: int) -> Mapping:
@@ -475,6 +509,16 @@ class Spender:
             raise WorldagentError(f"evaluate returned margins {np.shape(scored.margin)} and events {np.shape(scored.event)} for {len(z)} worlds.")
         self.generation, self.worlds, self.episodes = self.generation + 1, self.worlds + len(z), self.episodes + int(scored.episodes)
         return Scored(np.asarray(scored.margin, np.float64), np.asarray(scored.event, bool), int(scored.episodes))
+
+
+def learning_worlds(config: ImportanceConfig) -> int:
+    """Worlds an importance-sampling estimate spends learning its proposal at most: the pilot, the learned proposal's
+    rounds, or the search's rounds."""
+    if config.proposal == "surrogate":
+        return config.pilot
+    if config.proposal == "learned":
+        return config.pilot + learned.STAGES * round(config.pilot * learned.STAGE_SHARE)
+    return config.max_rounds * config.round_worlds
 
 
 def narrow_enough(hits: int, interval: tuple[float, float], estimate: float, target_width: float | None) -> bool:

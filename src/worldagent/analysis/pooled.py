@@ -55,11 +55,14 @@ class Strata:
         labels: int[M] each pool world's stratum (0: the likeliest).
         masses: f64[S] each stratum's share of the pool, a_h.
         modelled: f64[S] its mean modelled chance of the event.
+        shares: f64[S] the draws' shares per stratum when another model than ``modelled`` set them (None: Neyman's on
+            ``modelled``, ``allocation``).
     """
 
     labels: np.ndarray
     masses: np.ndarray
     modelled: np.ndarray
+    shares: np.ndarray | None = None
 
     @property
     def probability(self) -> float:
@@ -117,7 +120,9 @@ def stratify(log_chance: np.ndarray, edges: tuple[float, ...] = STRATUM_EDGES) -
 
 def allocation(strata: Strata, defensive: float | None = None) -> np.ndarray:
     """f64[S] shares of the draws per stratum: Neyman's, a_h · sqrt(p_h (1 − p_h)), on the modelled chances with
-    ``defensive`` of the mass spread over the whole pool."""
+    ``defensive`` of the mass spread over the whole pool (``strata.shares`` when they are set)."""
+    if strata.shares is not None:
+        return strata.shares
     assumed = assumed_chances(strata, defensive)
     spread = strata.masses * np.sqrt(assumed * (1 - assumed))
     return spread / spread.sum() if spread.sum() > 0 else strata.masses

@@ -105,7 +105,7 @@ def read_estimate(store, name: str) -> fr.Estimate:
     if campaign.optimiser == "is":
         fields = fr.ImportanceConfig.__dataclass_fields__
         importance = fr.ImportanceConfig(**{"proposal": "search", **{k: v for k, v in config.items() if k in fields}})  # older stores: search
-        surrogate = importance.proposal == "surrogate"
+        surrogate = importance.proposal in fr.POOLED
         describe = cached_describer(store.path.parent / config["pool_cache"], None) if surrogate and "pool_cache" in config else None
         timing = KeptTiming(timing_file(store.path, name)) if surrogate else None
         return fr.importance_sampling(evaluate, dim, config["worlds"], config=importance, describe=describe, timing=timing, **common)
@@ -144,11 +144,11 @@ def estimate_campaign(store, setup, selection, method: str, *, worlds: int, impo
     from worldagent.provenance import fingerprint
     from worldagent.search.objectives import LatentObjective, Objective
 
-    searched = importance.pilot if importance.proposal == "surrogate" else importance.max_rounds * importance.round_worlds
+    searched = fr.learning_worlds(importance)
     total = worlds + (searched if method == "is" else 0)
     config = {"event": selection.text, "repeats": setup.repeats, "batch": fr.BATCH, "agent": agent_record(setup.policy)}
     config |= {"worlds": int(worlds), "target_width": target_width}  # what ``read_estimate`` replays
-    surrogate = method == "is" and importance.proposal == "surrogate"
+    surrogate = method == "is" and importance.proposal in fr.POOLED
     if method == "is":
         config |= asdict(importance)
     if surrogate:

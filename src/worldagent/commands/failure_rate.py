@@ -76,7 +76,8 @@ def register(app: typer.Typer) -> None:
         proposal: str = typer.Option(
             ImportanceConfig.proposal,
             "--proposal",
-            help="Importance sampling's proposal: surrogate (a model of the worlds' descriptors) or search (cross-entropy).",
+            help="Importance sampling's proposal: surrogate (a model of the worlds' descriptors), learned (that model refitted over "
+            "rounds toward the agent's near-misses) or search (cross-entropy over latents).",
         ),
         pool: int = typer.Option(
             None, "--pool", help="Surrogate: prior worlds decoded and described (no episode) to draw from (default: what --pool-seconds buys)."
@@ -86,7 +87,9 @@ def register(app: typer.Typer) -> None:
             "--pool-seconds",
             help=f"Surrogate: time budget for describing the pool when --pool is not given (timed on a sample; at most {DEFAULT_POOL:,} worlds).",
         ),
-        pilot: int = typer.Option(ImportanceConfig.pilot, "--pilot", help="Surrogate: pool worlds evaluated to fit the model."),
+        pilot: int = typer.Option(
+            ImportanceConfig.pilot, "--pilot", help="Surrogate, learned: pool worlds evaluated to fit the model (learned: and per round)."
+        ),
         round_worlds: int = typer.Option(500, "--round-worlds", help="Search: worlds per round of the search for the proposal."),
         rounds: int = typer.Option(10, "--rounds", help="Search: rounds of the search at most."),
         components: int = typer.Option(8, "--components", help="Search: shifted priors in the proposal at most (1: one mean shift)."),

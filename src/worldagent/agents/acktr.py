@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from worldagent.agents.kfac import KFAC, KFACConfig
 from worldagent.agents.networks import ActorCritic
 from worldagent.agents.ppo import TrainState, single_agent_trainer, update_row
-from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns
+from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns, score_segment
 from worldagent.agents.trainer import Trainer, raw_key
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
@@ -175,6 +175,7 @@ def _core(config: ACKTRConfig, env, training_params):
         params_env = training_params(params_env, config, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         returns = targets(traj, last_value)
+        runner = score_segment(distribution, runner, traj, returns.reshape(traj.value.shape))
         obs = traj.obs.reshape(batch, *traj.obs.shape[2:])
         action = traj.action.reshape(batch)
 

@@ -39,6 +39,7 @@ from worldagent.agents import replay as replay_lib
 from worldagent.agents.networks import QNetwork
 from worldagent.agents.trainer import Trainer, budgeted_trainer, curve_row, raw_key
 from worldagent.configs import JsonConfig
+from worldagent.curricula import as_curriculum
 from worldagent.errors import WorldagentError
 
 
@@ -204,6 +205,8 @@ class DQNState:
         update: i32 chunks done (one episode of every env each).
         episodes: i32 episodes ended (per agent); env_steps: i32 env steps taken.
         steps: i32 vector steps taken; gradient_steps: i32 gradient steps taken (per agent).
+        curriculum: the curriculum's state (``worldagent.curricula``; ``()`` for ``dr``).
+        z, slot: f32[E, D] the latent of each env's world and the buffer slot it was replayed from.
     """
 
     params: Any
@@ -218,6 +221,9 @@ class DQNState:
     env_steps: jax.Array
     steps: jax.Array
     gradient_steps: jax.Array
+    curriculum: Any = ()
+    z: jax.Array | None = None
+    slot: jax.Array | None = None
 
 
 def _optimizer(config: DQNConfig) -> optax.GradientTransformation:
@@ -237,6 +243,19 @@ def _td_loss(config: DQNConfig, network: QNetwork, params, target_params, batch)
     target = batch["reward"] + config.gamma * (1.0 - batch["ended"].astype(jnp.float32)) * q_next
     loss = optax.huber_loss(q_taken, jax.lax.stop_gradient(target)).mean()
     return loss, q_taken.mean()
+
+
+def _td_magnitude(config: DQNConfig, network: QNetwork, state: DQNState, q, action, reward, next_obs, ended) -> jax.Array:
+    """f32[E]: each env's |TD error| of this step, averaged over agents (DQN's learning potential, PLR)."""
+    q_taken = jnp.take_along_axis(q, action[..., None], axis=-1)[..., 0]  # [E, N]
+    q_next_target = q_values(network, state.target_params, next_obs)
+    if config.double_q:
+        best = jnp.argmax(q_values(network, state.params, next_obs), axis=-1)
+        q_next = jnp.take_along_axis(q_next_target, best[..., None], axis=-1)[..., 0]
+    else:
+        q_next = q_next_target.max(axis=-1)
+    target = reward + config.gamma * (1.0 - ended.astype(jnp.float32))[:, None] * q_next
+    return jnp.abs(q_taken - target).reshape(q_taken.shape[0], -1).mean(axis=-1)
 
 
 def check_env(env) -> None:
@@ -304,14 +323,19 @@ def _core(config: DQNConfig, env, episode_length: int, training_params):
 
     def init(key: jax.Array, consts) -> DQNState:
         env_params, distribution, _ = consts
+        curriculum = as_curriculum(distribution)
         env_params = training_params(env_params, config, jnp.float32(0.0))
         key_params, key_worlds, key_reset, key_run = jax.random.split(key, 4)
         params = init_params(key_params, config, env)
-        worlds = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
-        obs, env_state = reset_all(jax.random.split(key_reset, num_envs), worlds, env_params)
+        schedule = curriculum.init(key_worlds)
+        draw = curriculum.sample(schedule, key_worlds, num_envs)
+        obs, env_state = reset_all(jax.random.split(key_reset, num_envs), draw.worlds, env_params)
         zero = jnp.int32(0)
         replay = replay_lib.create(config.buffer_slices, num_envs, num_agents, obs_shape)
-        return DQNState(params, params, jax.vmap(optimizer.init)(params), replay, env_state, obs, raw_key(key_run), zero, zero, zero, zero, zero)
+        return DQNState(
+            params, params, jax.vmap(optimizer.init)(params), replay, env_state, obs, raw_key(key_run), zero, zero, zero, zero, zero,
+            schedule, draw.z, draw.slot,
+        )  # fmt: skip
 
     def learn(key: jax.Array, state: DQNState) -> tuple[DQNState, jax.Array, jax.Array]:
         def one_agent(key, agent, params, target_params, opt_state):
@@ -327,31 +351,41 @@ def _core(config: DQNConfig, env, episode_length: int, training_params):
         target = jax.tree_util.tree_map(lambda new, old: jnp.where(copy, new, old), params, state.target_params)
         return state.replace(params=params, opt_state=opt_state, target_params=target, gradient_steps=gradient_steps), loss, q_mean
 
-    def env_step(state: DQNState, key: jax.Array, env_params):
+    def env_step(state: DQNState, key: jax.Array, env_params, scored: bool):
         key_act, key_env, key_learn = jax.random.split(key, 3)
         epsilon = epsilon_at(config, state.steps, episode_length)
-        action = epsilon_greedy(key_act, q_values(network, state.params, state.obs), epsilon)  # [E, N]
+        q = q_values(network, state.params, state.obs)  # [E, N, A]
+        action = epsilon_greedy(key_act, q, epsilon)  # [E, N]
         step_all = jax.vmap(env.step, in_axes=(0, 0, 0, None))
         obs, env_state, reward, terminated, truncated, _ = step_all(jax.random.split(key_env, num_envs), state.env_state, action, env_params)
         ended = jnp.logical_or(terminated, truncated).reshape(num_envs, -1).any(axis=-1)
+        td = _td_magnitude(config, network, state, q, action, reward, obs, ended) if scored else jnp.zeros(num_envs)
         replay = replay_lib.add(state.replay, state.obs, action, reward, ended)
         state = state.replace(replay=replay, env_state=env_state, obs=obs, steps=state.steps + 1)
         ready = (replay.filled >= min_filled) & (state.steps % config.train_every == 0)
         no_update = lambda k, s: (s, jnp.full(num_agents, jnp.nan), jnp.full(num_agents, jnp.nan))  # noqa: E731
         state, loss, q_mean = jax.lax.cond(ready, learn, no_update, key_learn, state)
-        return state, {"loss": loss, "q": q_mean, "epsilon": epsilon}
+        return state, {"loss": loss, "q": q_mean, "epsilon": epsilon, "td": td}
 
     def update(state: DQNState, consts) -> tuple[DQNState, dict]:
         # One episode of every env, then every env restarts on a world drawn here (one draw per
         # episode, not per step: G(z) is costly). The episode's metrics are read before the reset.
+        # A curriculum scores each env's episode (its mean |TD error|, or its target margin) before the draw.
         env_params, distribution, budget = consts
+        curriculum = as_curriculum(distribution)
+        scored = curriculum.adaptive and curriculum.target is None
         env_params = training_params(env_params, config, jnp.clip(state.episodes / budget, 0.0, 1.0))
         key, key_worlds, key_reset, key_steps = jax.random.split(jax.random.wrap_key_data(state.key), 4)
-        state, trace = jax.lax.scan(lambda s, k: env_step(s, k, env_params), state, jax.random.split(key_steps, episode_length))
+        state, trace = jax.lax.scan(lambda s, k: env_step(s, k, env_params, scored), state, jax.random.split(key_steps, episode_length))
         metrics = jax.vmap(env.metrics)(state.env_state)
-        worlds = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
-        obs, env_state = reset_all(jax.random.split(key_reset, num_envs), worlds, env_params)
+        schedule = state.curriculum
+        if curriculum.adaptive:
+            score = curriculum.episode_score(trace["td"].mean(axis=0), metrics)
+            schedule = curriculum.update(schedule, state.z, state.slot, score, jnp.ones(num_envs, bool))
+        draw = curriculum.sample(schedule, key_worlds, num_envs)
+        obs, env_state = reset_all(jax.random.split(key_reset, num_envs), draw.worlds, env_params)
         state = state.replace(
+            curriculum=schedule, z=draw.z, slot=draw.slot,
             env_state=env_state, obs=obs, key=raw_key(key), update=state.update + 1,
             episodes=state.episodes + num_envs, env_steps=state.env_steps + num_envs * episode_length,
         )  # fmt: skip

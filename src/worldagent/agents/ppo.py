@@ -27,7 +27,7 @@ import optax
 from flax import struct
 
 from worldagent.agents.networks import ActorCritic
-from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner
+from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, score_segment
 from worldagent.agents.trainer import Trainer, budgeted_trainer, curve_row, raw_key
 from worldagent.configs import JsonConfig
 from worldagent.errors import WorldagentError
@@ -251,6 +251,7 @@ def _core(config: PPOConfig, env, training_params):
         params_env = training_params(params_env, config, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
+        runner = score_segment(distribution, runner, traj, targets)
         flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731
         data = tuple(map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets)))
         lr = config.learning_rate * (1.0 - fraction) if config.anneal_lr else jnp.float32(config.learning_rate)

@@ -28,6 +28,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from worldagent.curricula import as_curriculum
+from worldagent.curricula.scores import positive_value_loss
 from worldagent.envs.core import step_autoreset
 
 # apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])
@@ -43,12 +45,25 @@ class EnvRunner:
         state: the batched env state (leading axis B).
         episode_return: f32[B] return of each env's episode so far.
         episode_length: i32[B] steps of each env's episode so far.
+        curriculum: the curriculum's state (``()`` for ``dr``).
+        z, slot: f32[B, D] the latent of each env's world (D = 0 without latents) and the
+            buffer slot it was replayed from (-1: new); ``pending_z``, ``pending_slot``: the
+            same of each env's pending world.
+        potential, potential_steps: f32[B] the learning potential summed over each env's
+            episode so far (the steps already scored), and how many steps that sum holds.
     """
 
     obs: jax.Array
     state: Any
     episode_return: jax.Array
     episode_length: jax.Array
+    curriculum: Any
+    z: jax.Array
+    slot: jax.Array
+    pending_z: jax.Array
+    pending_slot: jax.Array
+    potential: jax.Array
+    potential_steps: jax.Array
 
 
 @struct.dataclass
@@ -66,6 +81,7 @@ class Trajectory:
         episode: dict of per-episode metrics, meaningful where ``done``: "return" (f32),
             "length" (i32) and the env step's per-env ``info`` entries at that step (racing:
             "crashed", "lap_completed", "progress"), whatever the env reports.
+        metrics: ``env.metrics`` of each env's episode as of each step (before any reset).
     """
 
     obs: jax.Array
@@ -76,14 +92,18 @@ class Trajectory:
     done: jax.Array
     terminated: jax.Array
     episode: dict
+    metrics: dict
 
 
 def init_runner(key: jax.Array, env, env_params, distribution, num_envs: int) -> EnvRunner:
-    """B envs reset onto B worlds drawn from ``distribution``."""
+    """B envs reset onto B worlds drawn from ``distribution`` (a curriculum or a fixed distribution)."""
+    curriculum = as_curriculum(distribution)
     key_worlds, key_reset = jax.random.split(key)
-    worlds = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
-    obs, state = jax.vmap(env.reset, in_axes=(0, 0, None))(jax.random.split(key_reset, num_envs), worlds, env_params)
-    return EnvRunner(obs, state, jnp.zeros(num_envs, jnp.float32), jnp.zeros(num_envs, jnp.int32))
+    state = curriculum.init(key_worlds)
+    draw = curriculum.sample(state, key_worlds, num_envs)
+    obs, env_state = jax.vmap(env.reset, in_axes=(0, 0, None))(jax.random.split(key_reset, num_envs), draw.worlds, env_params)
+    zeros = jnp.zeros(num_envs, jnp.float32)
+    return EnvRunner(obs, env_state, zeros, jnp.zeros(num_envs, jnp.int32), state, draw.z, draw.slot, draw.z, draw.slot, zeros, zeros)
 
 
 def sample_action(key: jax.Array, logits: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -121,7 +141,7 @@ def collect(
         apply_fn: ``apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])``.
         net_params: the actor-critic's parameters.
         env, env_params: the environment and its params.
-        distribution: a world distribution with ``sample(key) -> world``.
+        distribution: a curriculum, or a world distribution with ``sample(key) -> world``.
         num_steps: T, steps per env (static).
 
     Returns:
@@ -129,27 +149,60 @@ def collect(
         segment, and the value of the state after its last step (for bootstrapping).
     """
     num_envs = runner.episode_return.shape[0]
+    curriculum = as_curriculum(distribution)
     key_worlds, key_steps = jax.random.split(key)
-    pending = jax.vmap(distribution.sample)(jax.random.split(key_worlds, num_envs))
-    step_env = jax.vmap(lambda k, s, a, w: step_autoreset(env, k, s, a, env_params, next_world=w))
+    draw = curriculum.sample(runner.curriculum, key_worlds, num_envs)
+    step_env = jax.vmap(lambda k, s, a, w: step_autoreset(env, k, s, a, env_params, next_world=w, ended_metrics=True))
 
     def one_step(runner: EnvRunner, step_key):
         key_act, key_env = jax.random.split(step_key)
         logits, value = apply_fn(net_params, runner.obs)
         action, log_prob = sample_action(key_act, logits)
-        obs, state, reward, terminated, truncated, info = step_env(jax.random.split(key_env, num_envs), runner.state, action, pending)
+        obs, state, reward, terminated, truncated, info, metrics = step_env(jax.random.split(key_env, num_envs), runner.state, action, draw.worlds)
         done = jnp.logical_or(terminated, truncated)
         episode_return = runner.episode_return + reward
         episode_length = runner.episode_length + 1
         per_env = {name: value for name, value in info.items() if jnp.ndim(value) == 1}  # per-agent entries do not summarise
         episode = {"return": episode_return, "length": episode_length, **per_env}
-        record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, episode)
-        runner = EnvRunner(obs, state, jnp.where(done, 0.0, episode_return), jnp.where(done, 0, episode_length))
+        record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, episode, metrics)
+        runner = runner.replace(
+            obs=obs, state=state, episode_return=jnp.where(done, 0.0, episode_return), episode_length=jnp.where(done, 0, episode_length)
+        )
         return runner, record
 
+    runner = runner.replace(pending_z=draw.z, pending_slot=draw.slot)
     runner, trajectory = jax.lax.scan(one_step, runner, jax.random.split(key_steps, num_steps))
     _, last_value = apply_fn(net_params, runner.obs)
     return runner, trajectory, last_value
+
+
+def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targets: jax.Array) -> EnvRunner:
+    """The runner after the curriculum has scored the episodes that ended in ``trajectory``.
+
+    Each episode's learning potential is the mean positive value loss over its steps,
+    max(target - V, 0) with the trainer's value ``targets`` f32[T, B] (an episode that began in
+    an earlier segment carries its sum in ``runner.potential``). Its score is that, or its
+    target margin (``curriculum.episode_score``). A fixed distribution (``dr``) is left alone.
+    """
+    curriculum = as_curriculum(distribution)
+    if not curriculum.adaptive:
+        return runner
+    potential = positive_value_loss(targets, trajectory.value)
+
+    def one_step(carry, step):
+        z, slot, total, steps = carry
+        step_potential, done, metrics = step
+        total, steps = total + step_potential, steps + 1.0
+        ended = (z, slot, curriculum.episode_score(total / steps, metrics), done)
+        switch = lambda new, old: jnp.where(done.reshape(-1, *[1] * (old.ndim - 1)), new, old)  # noqa: E731
+        carry = (switch(runner.pending_z, z), switch(runner.pending_slot, slot), jnp.where(done, 0.0, total), jnp.where(done, 0.0, steps))
+        return carry, ended
+
+    start = (runner.z, runner.slot, runner.potential, runner.potential_steps)
+    (z, slot, total, steps), (zs, slots, scores, valid) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
+    flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
+    state = curriculum.update(runner.curriculum, flat(zs), flat(slots), flat(scores), flat(valid))
+    return runner.replace(curriculum=state, z=z, slot=slot, potential=total, potential_steps=steps)
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[jax.Array, jax.Array]:

@@ -26,6 +26,7 @@ import numpy as np
 from worldagent.agents.algorithms import get_algorithm
 from worldagent.agents.loaders import POLICY_DIR
 from worldagent.agents.saved import SavedPolicy, load_policy, save_policy
+from worldagent.curricula.snapshots import load_snapshots, save_snapshot
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.files import write_atomically, write_bytes
@@ -36,6 +37,7 @@ CHECKPOINT_FILE = "checkpoint.msgpack"
 RUN_FILE = "run.json"
 CURVE_FILE = "curve.csv"
 PLOT_FILE = "curve.png"
+CURRICULUM_PLOT_FILE = "curriculum.png"
 HOST_FIELDS = ("update", "wall_seconds")  # curve columns the driver adds to the trainer's
 
 
@@ -191,6 +193,7 @@ class OpenRun:
         resumed_from: the checkpoint's update count when resumed, else None.
         wall_offset: seconds the curve had already counted before this call.
         chunk_updates: updates per jitted chunk, a checkpoint after each.
+        distribution: what the run draws its worlds from (a distribution or a curriculum).
     """
 
     spec: Any
@@ -205,6 +208,7 @@ class OpenRun:
     resumed_from: int | None
     wall_offset: float
     chunk_updates: int
+    distribution: Any = None
 
 
 def _check_chunk_updates(config, chunk_updates: int | None) -> int:
@@ -252,7 +256,7 @@ def open_run(
     out_dir.mkdir(parents=True, exist_ok=True)
     write_bytes(out_dir / RUN_FILE, json.dumps(record, indent=1).encode())
     offset = rows[-1]["wall_seconds"] if rows else 0.0
-    return OpenRun(spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates)
+    return OpenRun(spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates, distribution)
 
 
 def record_chunk(run: OpenRun, state: Any, curve: dict, elapsed: float) -> None:
@@ -261,6 +265,7 @@ def record_chunk(run: OpenRun, state: Any, curve: dict, elapsed: float) -> None:
     run.rows += _new_rows(curve, int(state.update), run.wall_offset + elapsed)
     write_bytes(run.out_dir / CHECKPOINT_FILE, flax.serialization.to_bytes(jax.device_get(state)))
     _write_curve(run.out_dir / CURVE_FILE, run.rows)
+    save_snapshot(run.out_dir, state, int(state.update))
 
 
 def status(run: OpenRun) -> dict:
@@ -273,12 +278,23 @@ def finish_run(run: OpenRun, wall: float) -> TrainResult:
     state, rows, seed = run.state, run.rows, run.record["seed"]
     if rows:
         plot_curve(rows, run.out_dir / PLOT_FILE, run.spec)
+    _plot_curriculum(run)
     extra = {"seed": seed, "episodes": int(state.episodes), "env_steps": int(state.env_steps), "updates": int(state.update)}
     extra = {**extra, "distribution": run.record["distribution"], "options": run.record["options"]}
     agent = _save_agent(run.out_dir, run.spec, run.algorithm, run.trainer, state, run.env, run.config, extra)
     columns = list(rows[0]) if rows else list(HOST_FIELDS)
     curve = {k: np.array([r[k] for r in rows]) for k in columns}
     return TrainResult(agent, run.out_dir, curve, int(state.episodes), int(state.env_steps), wall, run.resumed_from)
+
+
+def _plot_curriculum(run: OpenRun) -> None:
+    """``curriculum.png`` beside the curve, when the run's curriculum kept a buffer."""
+    snapshots = load_snapshots(run.out_dir)
+    if snapshots:
+        from worldagent.reports.curriculum import curriculum_figure
+
+        generator = getattr(getattr(run.distribution, "worlds", None), "generator", None)
+        curriculum_figure(snapshots, run.spec, generator, run.out_dir / CURRICULUM_PLOT_FILE, title=run.record["distribution"])
 
 
 def train(
@@ -303,9 +319,11 @@ def train(
         spec: the environment (an ``EnvSpec`` or its name); the env is ``spec.make_env(options)``.
         algo: a name in ``algorithms.ALGORITHMS`` (see ``algorithms.training_config``).
         config: the algorithm's config.
-        distribution: a world distribution (``distributions.world_distribution``).
+        distribution: a world distribution (``distributions.world_distribution``) or a
+            curriculum (``curricula.make_curriculum``).
         out_dir: run directory: ``run.json``, ``checkpoint.msgpack``, ``curve.csv``,
-            ``curve.png`` and, at the end, the agent in ``policy/``.
+            ``curve.png`` and, at the end, the agent in ``policy/``; with a curriculum that keeps
+            a buffer, its snapshot at every checkpoint (``curriculum/``) and ``curriculum.png``.
         seed: the run's seed (becomes the PRNG key here).
         options: the env's options (e.g. harvest ``{"tagger": (0,)}``).
         params: the env params to train under (default: those ``spec.make_env(options)`` gives);

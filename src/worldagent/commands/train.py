@@ -21,6 +21,12 @@ from worldagent.errors import WorldagentError
 from worldagent.files import check_writable
 
 
+def curricula_help() -> str:
+    from worldagent.curricula import curricula
+
+    return ", ".join(curricula()) + " (dr, every world afresh, is the default; see docs/curriculum.md)."
+
+
 def register(app: typer.Typer) -> None:
     """Add ``worldagent train``."""
 
@@ -35,6 +41,17 @@ def register(app: typer.Typer) -> None:
             "generator", "--worlds", help="Training worlds: generator (procedural), vae (G(z), needs --generator), or a dataset .npz."
         ),
         generator: Path = typer.Option(None, "--generator", help="Generator directory for --worlds vae."),
+        curriculum: str = typer.Option("dr", "--curriculum", help="Where each episode's world comes from as the agent learns: " + curricula_help()),
+        target: str = typer.Option(
+            None, "--target", help="Score worlds by this event (e.g. 'crash_rate > 0.5') or, with --maximize/--minimize, this metric."
+        ),
+        maximize: bool = typer.Option(None, "--maximize/--minimize", help="With --target METRIC: train toward worlds where it is high / low."),
+        curriculum_settings: list[str] = typer.Option(
+            [],
+            "--curriculum-set",
+            help="A curriculum setting NAME=VALUE (repeatable): buffer_size, replay_prob, temperature, staleness, "
+            "min_fill, edit_prob, mutation_scale, window; defaults in docs/curriculum.md.",
+        ),  # fmt: skip
         option: list[str] = option_flag(),
         settings: list[str] = set_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the run."),
@@ -45,6 +62,8 @@ def register(app: typer.Typer) -> None:
         from worldagent.agents.algorithms import parse_settings, training_config
         from worldagent.agents.distributions import world_distribution
         from worldagent.agents.training import train as run_training
+        from worldagent.curricula import check_request, label, make_curriculum, parse_curriculum_settings
+        from worldagent.curricula.scores import target_score
         from worldagent.envs import registry
 
         spec = registry.get(env)
@@ -56,8 +75,17 @@ def register(app: typer.Typer) -> None:
         if worlds == "vae" and generator is None:
             raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
         config = training_config(spec, algo, episodes=episodes, options=options, **parse_settings(settings, [algo])[algo])
+        if maximize is not None and target is None:
+            raise WorldagentError("--maximize/--minimize direct a --target metric; add --target METRIC (e.g. --target conflict --minimize).")
+        scoring = target_score(spec, target, maximize) if target is not None else None
+        settings = parse_curriculum_settings(curriculum_settings)
+        check_request(curriculum, settings, worlds == "vae" or (Path(worlds) / "generator.json").is_file())
         distribution = world_distribution(spec, worlds, generator_dir=generator, progress=not quiet)
+        schedule = make_curriculum(curriculum, distribution, settings, scoring)
         result = run_training(
-            spec, algo, config, distribution, out, seed=seed, options=options, progress=not quiet, resume=resume, distribution_spec=worlds
-        )
+            spec, algo, config, schedule, out, seed=seed, options=options, progress=not quiet, resume=resume,
+            distribution_spec=worlds if curriculum == "dr" else f"{worlds}; curriculum {label(schedule)}",
+        )  # fmt: skip
         console.print(f"trained {algo} for {result.episodes:,} episodes ({result.env_steps:,} steps, {result.wall_seconds:.0f} s) -> {out}")
+        if (out / "curriculum.png").is_file():
+            console.print(f"the curriculum's buffer over training: {out / 'curriculum.png'} (snapshots in {out / 'curriculum'})")

@@ -50,7 +50,7 @@ class Environment:
         raise NotImplementedError
 
 
-def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Array, params: Any, next_world: Any = None):
+def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Array, params: Any, next_world: Any = None, ended_metrics: bool = False):
     """``env.step``, then, where the episode ended, a fresh episode on the same world.
 
     Training on a distribution of worlds passes ``next_world``, a world drawn by the caller
@@ -58,7 +58,8 @@ def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Arr
 
     The returned ``obs`` and ``state`` are those of the new episode where it ended; ``reward``,
     ``terminated``, ``truncated`` and ``info`` are those of the step that ended it (gymnax's
-    convention). The world is never copied: only the dynamic fields are selected. Envs with an
+    convention). With ``ended_metrics`` a seventh value follows: ``env.metrics`` of the episode
+    as of this step, before any reset (what a curriculum scores an ended episode by). The world is never copied: only the dynamic fields are selected. Envs with an
     ``observe(state, params)`` method are observed once, after the selection, so that the
     observations of the step and of the reset are never both computed.
     """
@@ -76,6 +77,8 @@ def step_autoreset(env: Environment, key: jax.Array, state: Any, action: jax.Arr
         new_state = new_state.replace(world=jax.tree_util.tree_map(pick, reset_state.world, state.world))
     observe = getattr(env, "observe", None)
     new_obs = observe(new_state, params) if observe is not None else pick(reset_obs, obs)
+    if ended_metrics:
+        return new_obs, new_state, reward, terminated, truncated, info, env.metrics(next_state)
     return new_obs, new_state, reward, terminated, truncated, info
 
 

@@ -1,0 +1,112 @@
+"""Curricula: where each training episode's world comes from, adapting while the agent learns (issue 25).
+
+A curriculum wraps a world distribution (``agents/distributions.py``) and is passed to a trainer
+in its place. It is a pytree with a small interface, all pure and jitted inside the training
+program (no host round trip per episode)::
+
+    state = curriculum.init(key)                             # part of the trainer state
+    draw = curriculum.sample(state, key, n)                  # next worlds of n envs: z, slot, worlds
+    state = curriculum.update(state, z, slot, score, valid)  # after episodes end, with their scores
+    score = curriculum.episode_score(potential, metrics)     # what the trainer measured -> score
+
+Every module in this package with a ``build(worlds, settings, target)`` is a curriculum, found
+by its module name (``dr``, ``plr``, ``accel``, ``target``): a new curriculum is one new file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import pkgutil
+from functools import cache
+from typing import Any
+
+from worldagent.errors import WorldagentError
+
+DEFAULT = "dr"
+
+
+@cache
+def curricula() -> dict[str, Any]:
+    """{name: module} of every curriculum (modules of this package that define ``build``)."""
+    modules = (importlib.import_module(f"{__name__}.{info.name}") for info in pkgutil.iter_modules(__path__))
+    return {module.__name__.rsplit(".", 1)[-1]: module for module in modules if hasattr(module, "build")}
+
+
+def describe() -> str:
+    """One line per curriculum, for ``--help``."""
+    return "; ".join(f"{name}: {module.HELP}" for name, module in curricula().items())
+
+
+def make_curriculum(name: str, worlds: Any, settings: dict | None = None, target=None) -> Any:
+    """The curriculum ``name`` over the distribution ``worlds``.
+
+    Args:
+        name: a curriculum's name (``curricula()``).
+        worlds: the distribution it draws from (``LatentWorlds`` for all but ``dr``).
+        settings: {setting: value} over the curriculum's defaults (``replay.Settings``).
+        target: a ``scores.TargetScore`` to score episodes by (``scores.target_score``), or None.
+    """
+    table = curricula()
+    if name not in table:
+        raise WorldagentError(f"unknown curriculum {name!r}; use one of {', '.join(table)}.")
+    return table[name].build(worlds, dict(settings or {}), target)
+
+
+def check_request(name: str, settings: dict, worlds_have_latents: bool) -> None:
+    """Refuse a curriculum request before any world is built: an unknown name, bad settings, or latents missing."""
+    table = curricula()
+    if name not in table:
+        raise WorldagentError(f"unknown curriculum {name!r}; use one of {', '.join(table)}.")
+    if getattr(table[name], "LATENTS", False) and not worlds_have_latents:
+        raise WorldagentError(f"curriculum {name!r} draws latents of a generator; train on --worlds vae --generator DIR (or use --curriculum dr).")
+    if settings and getattr(table[name], "LATENTS", False):
+        from worldagent.curricula.replay import Settings
+
+        Settings(**settings)  # range checks, one line each
+
+
+def label(curriculum: Any) -> str:
+    """How a run's curriculum is written in ``run.json`` (so a resumed run must use the same one)."""
+    if not getattr(curriculum, "adaptive", False):
+        return "dr"
+    from worldagent.curricula.replay import Settings
+
+    changed = {f.name: getattr(curriculum.settings, f.name) for f in dataclasses.fields(Settings)}
+    target = f" target={curriculum.target.text!r}" if curriculum.target is not None else ""
+    return f"{curriculum.name} " + " ".join(f"{k}={v}" for k, v in changed.items()) + target
+
+
+def as_curriculum(distribution: Any) -> Any:
+    """A trainer's ``distribution`` argument as a curriculum: a fixed distribution becomes ``dr``."""
+    if hasattr(distribution, "adaptive"):
+        return distribution
+    from worldagent.curricula.dr import DomainRandomisation
+
+    return DomainRandomisation(distribution)
+
+
+def parse_curriculum_settings(texts: list[str] | tuple[str, ...]) -> dict[str, Any]:
+    """``["buffer_size=1000", "replay_prob=0.8"]`` -> {field: typed value} of ``replay.Settings``; bad ones refused in one line."""
+    from worldagent.curricula.replay import Settings
+
+    types = {f.name: type(f.default) for f in dataclasses.fields(Settings)}
+    parsed: dict[str, Any] = {}
+    for text in texts:
+        name, sep, value = text.partition("=")
+        name = name.strip()
+        if not sep or name not in types:
+            raise WorldagentError(f"--curriculum-set {text!r}: write NAME=VALUE with NAME one of {', '.join(types)}.")
+        parsed[name] = _typed(name, value.strip(), types[name])
+    return parsed
+
+
+def _typed(name: str, value: str, kind: type) -> Any:
+    if kind is bool:
+        if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
+            raise WorldagentError(f"--curriculum-set {name}={value!r}: expected true or false.")
+        return value.lower() in ("true", "1", "yes")
+    try:
+        return kind(value)
+    except ValueError:
+        raise WorldagentError(f"--curriculum-set {name}={value!r}: expected {'an integer' if kind is int else 'a number'}.") from None

@@ -1,0 +1,170 @@
+"""Curricula (issue 25): the PLR buffer, replay and edits, target scores, and a curriculum run on the toy env."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from flax import struct
+
+from toy_env import registered
+from worldagent.agents import training
+from worldagent.agents.distributions import LatentWorlds, world_distribution
+from worldagent.agents.ppo import PPOConfig
+from worldagent.curricula import buffer as buffer_lib
+from worldagent.curricula import check_request, make_curriculum, parse_curriculum_settings
+from worldagent.curricula.replay import Settings
+from worldagent.curricula.scores import target_score
+from worldagent.curricula.snapshots import find_buffer, load_snapshots
+from worldagent.errors import WorldagentError
+
+TINY_PPO = PPOConfig(total_episodes=48, num_envs=8, num_steps=16, num_minibatches=2, update_epochs=1, hidden=(16,))
+
+
+def buffer_with(scores, dim: int = 2, size: int | None = None) -> buffer_lib.Buffer:
+    """A buffer holding one new latent per score (latent i = (i, i, ...)), in order."""
+    scores = np.asarray(scores, np.float32)
+    n = len(scores)
+    z = jnp.repeat(jnp.arange(n, dtype=jnp.float32)[:, None], dim, axis=1)
+    empty = buffer_lib.empty(size or n, dim)
+    return buffer_lib.record(empty, z, jnp.full(n, -1), jnp.asarray(scores), jnp.ones(n, bool), window=1)
+
+
+def test_a_full_buffer_keeps_the_highest_scores_and_updates_replayed_latents_in_place():
+    buffer = buffer_with([0.1, 0.5, 0.3, 0.9, 0.05], size=3)  # 0.9 evicts 0.1; 0.05 never enters
+    assert sorted(np.asarray(buffer.score).tolist()) == pytest.approx([0.3, 0.5, 0.9])
+    assert set(np.asarray(buffer.z)[:, 0].tolist()) == {1.0, 2.0, 3.0}
+    slot = int(np.flatnonzero(np.asarray(buffer.z)[:, 0] == 2.0)[0])  # latent 2, score 0.3
+    z = buffer.z[slot][None]
+    replaced = buffer_lib.record(buffer, z, jnp.array([slot]), jnp.array([0.7]), jnp.array([True]), window=1)
+    assert float(replaced.score[slot]) == pytest.approx(0.7)  # PLR: the latest score
+    averaged = buffer_lib.record(buffer, z, jnp.array([slot]), jnp.array([0.7]), jnp.array([True]), window=8)
+    assert float(averaged.score[slot]) == pytest.approx(0.5)  # a target: the mean of its episodes
+    assert int(averaged.count[slot]) == 2 and int(averaged.last[slot]) == int(averaged.clock) == 6
+    evicted = buffer_lib.record(buffer, z + 100.0, jnp.array([slot]), jnp.array([0.01]), jnp.array([True]), window=1)
+    assert float(evicted.score[slot]) == pytest.approx(0.3)  # the slot no longer holds that latent: a new one, too weak to enter
+
+
+def test_replay_probabilities_are_rank_based_and_mixed_with_staleness():
+    buffer = buffer_with([3.0, 1.0, 2.0])  # ranks 1, 3, 2; scored at clocks 1, 2, 3
+    by_rank = np.array([1.0, 3.0, 2.0]) ** (-1 / 0.3)
+    np.testing.assert_allclose(buffer_lib.replay_probabilities(buffer, 0.3, 0.0), by_rank / by_rank.sum(), rtol=1e-5)
+    ages = np.array([2.0, 1.0, 0.0])  # clock 3 less the clock each was last scored at
+    np.testing.assert_allclose(buffer_lib.replay_probabilities(buffer, 0.3, 1.0), ages / ages.sum(), rtol=1e-6)
+    partial = buffer_with([1.0], size=4)
+    np.testing.assert_allclose(buffer_lib.replay_probabilities(partial, 0.3, 0.3), [1.0, 0.0, 0.0, 0.0])  # empty slots never drawn
+
+
+class FakeGenerator(struct.PyTreeNode):
+    """Latents to toy worlds: the pool world picked by the first coordinate (enough for a curriculum)."""
+
+    pool: object
+    latent_dim: int = struct.field(pytree_node=False, default=3)
+
+    def __call__(self, z):
+        n = jax.tree_util.tree_leaves(self.pool)[0].shape[0]
+        index = jnp.clip(jnp.floor((z[:, 0] + 3.0) / 6.0 * n), 0, n - 1).astype(jnp.int32)
+        return jax.tree_util.tree_map(lambda leaf: leaf[index], self.pool)
+
+
+@pytest.fixture(scope="module")
+def toy():
+    with registered() as spec:
+        pool = world_distribution(spec, "generator", size=8, seed=0)
+        yield spec, LatentWorlds(FakeGenerator(pool.worlds))
+
+
+def test_draws_replay_as_often_as_asked_and_by_the_buffer_s_probabilities(toy):
+    _, worlds = toy
+    curriculum = make_curriculum("plr", worlds, {"buffer_size": 4, "replay_prob": 0.3})
+    buffer = buffer_with([0.4, 0.1, 0.9, 0.2], dim=3)
+    draw = jax.jit(lambda key: curriculum.sample(curriculum.init(key).replace(buffer=buffer), key, 20000))(jax.random.key(1))
+    replayed = np.asarray(draw.slot) >= 0
+    assert abs(replayed.mean() - 0.3) < 0.015
+    counts = np.bincount(np.asarray(draw.slot)[replayed], minlength=4) / replayed.sum()
+    np.testing.assert_allclose(counts, buffer_lib.replay_probabilities(buffer, 0.3, 0.3), atol=0.02)
+    np.testing.assert_array_equal(np.asarray(draw.z)[replayed], np.asarray(buffer.z)[np.asarray(draw.slot)[replayed]])
+
+
+def test_nothing_is_replayed_before_the_buffer_is_filled_enough(toy):
+    _, worlds = toy
+    curriculum = make_curriculum("plr", worlds, {"buffer_size": 8, "replay_prob": 1.0, "min_fill": 0.5})
+    three = buffer_with([0.1, 0.2, 0.3], dim=3, size=8)
+    draw = curriculum.sample(curriculum.init(jax.random.key(0)).replace(buffer=three), jax.random.key(2), 64)
+    assert (np.asarray(draw.slot) == -1).all()
+
+
+def test_edits_are_small_finite_steps_from_buffer_latents(toy):
+    _, worlds = toy
+    curriculum = make_curriculum("accel", worlds, {"buffer_size": 4, "replay_prob": 0.0, "edit_prob": 1.0, "mutation_scale": 0.1})
+    buffer = buffer_with([0.4, 0.1, 0.9, 0.2], dim=3)
+    draw = curriculum.sample(curriculum.init(jax.random.key(0)).replace(buffer=buffer), jax.random.key(3), 4000)
+    z = np.asarray(draw.z)
+    assert np.isfinite(z).all() and (np.asarray(draw.slot) == -1).all()  # edits are new latents
+    step = z - np.round(z[:, :1]).repeat(3, axis=1)  # every buffer latent is (i, i, i)
+    assert np.abs(step).max() < 0.7 and 0.09 < step.std() < 0.11
+
+
+def test_target_margins_rank_worlds_by_the_event():
+    score = target_score("racing", "crash_rate > 0.5 and return < 0")
+    margins = score({"crashed": jnp.array([1.0, 0.0, 1.0]), "return": jnp.array([-5.0, -5.0, 3.0])})
+    np.testing.assert_allclose(margins, [0.5, -0.5, -3.0])  # the smallest clause margin
+    minimise = target_score("harvest", "conflict", maximize=False)
+    np.testing.assert_allclose(minimise({"conflict": jnp.array([0.0, 2.0])}), [0.0, -2.0])
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: Settings(replay_prob=1.5), "replay_prob=1.5 is outside [0, 1]"),
+        (lambda: Settings(buffer_size=0), "buffer_size=0; it must be at least 1"),
+        (lambda: parse_curriculum_settings(["buffer=3"]), "NAME one of buffer_size"),
+        (lambda: parse_curriculum_settings(["buffer_size=big"]), "expected an integer"),
+        (lambda: target_score("racing", "bogus > 1"), "unknown racing metric 'bogus'"),
+        (lambda: target_score("racing", "normalised_return > 0.5"), "not during training"),
+        (lambda: check_request("plr", {}, worlds_have_latents=False), "--worlds vae --generator DIR"),
+        (lambda: check_request("nope", {}, worlds_have_latents=True), "unknown curriculum 'nope'"),
+    ],
+)
+def test_bad_curriculum_requests_get_one_line_naming_the_fix(call, message):
+    with pytest.raises(WorldagentError, match=None) as error:
+        call()
+    assert message in str(error.value) and "\n" not in str(error.value)
+
+
+def test_target_curriculum_needs_a_target(toy):
+    _, worlds = toy
+    with pytest.raises(WorldagentError, match="needs --target"):
+        make_curriculum("target", worlds)
+
+
+def test_a_killed_curriculum_run_resumes_with_the_identical_buffer(toy, tmp_path):
+    spec, worlds = toy
+    curriculum = make_curriculum("accel", worlds, {"buffer_size": 16, "min_fill": 0.25}, target_score(spec, "return", maximize=True))
+    whole = training.train(spec, "ppo", TINY_PPO, curriculum, tmp_path / "whole", seed=3, progress=False, chunk_updates=2)
+    training.train(spec, "ppo", TINY_PPO, curriculum, tmp_path / "killed", seed=3, progress=False, stop_after_chunks=2, chunk_updates=2)
+    resumed = training.train(spec, "ppo", TINY_PPO, curriculum, tmp_path / "killed", seed=3, progress=False, chunk_updates=2)
+    assert resumed.resumed_from_update == 4
+    finals = [load_snapshots(path)[-1] for path in (tmp_path / "whole", tmp_path / "killed")]
+    assert len(finals[0]["score"]) >= 4  # the buffer filled and replay began (min_fill 0.25 of 16)
+    for name in ("z", "score", "count", "age"):
+        np.testing.assert_array_equal(finals[0][name], finals[1][name])
+    leaves = [jax.tree_util.tree_leaves(r.agent.params) for r in (whole, resumed)]
+    assert all(np.array_equal(a, b) for a, b in zip(*leaves))
+    assert (tmp_path / "whole" / "curriculum.png").is_file()
+
+
+def test_dr_trains_exactly_as_the_plain_distribution(toy):
+    spec, worlds = toy
+    env, params = spec.make_env()
+    from worldagent.agents.ppo import make_train
+
+    config = dataclasses.replace(TINY_PPO, total_episodes=16)
+    plain = make_train(config, env, params, worlds, spec.training_params).train(jax.random.key(0))[0]
+    wrapped = make_train(config, env, params, make_curriculum("dr", worlds), spec.training_params).train(jax.random.key(0))[0]
+    assert find_buffer(wrapped) is None
+    for a, b in zip(jax.tree_util.tree_leaves(plain.params), jax.tree_util.tree_leaves(wrapped.params)):
+        np.testing.assert_array_equal(a, b)

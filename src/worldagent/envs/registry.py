@@ -122,11 +122,15 @@ class Pictures:
         episodes: ``(matplotlib axis, world, episodes) -> None``: the world with the replayed
             episodes' trajectories (``evaluation.trajectories.Episodes``) on it.
         sheet: ``(batched worlds, path) -> path``: many worlds on one PNG (``worldagent worlds``).
+        locate: ``(positions f[..., P], world, size) -> f[..., 2]``: where positions as ``trace``
+            records them fall on ``world(world, size)``, as pixel (x, y); the explorer animates
+            episodes with it (None: it shows ``episodes``' still picture instead).
     """
 
     world: Callable[[Any, int], Any]
     episodes: Callable[[Any, Any, Any], None] | None = None
     sheet: Callable[[Any, Any], Any] | None = None
+    locate: Callable[[Any, Any, int], Any] | None = None
 
 
 @dataclass(frozen=True)

@@ -155,6 +155,13 @@ def world_picture(world, size: int):
     return image.resize((size, size), Image.NEAREST)
 
 
+def locate(positions, world, size: int):
+    """Pixel (x, y) of the centres of (row, col) cells on ``world_picture``."""
+    height, width = np.shape(world.walls)[-2:]
+    cells = np.asarray(positions, np.float64)
+    return np.stack([(cells[..., 1] + 0.5) * size / width, (cells[..., 0] + 0.5) * size / height], axis=-1)
+
+
 def draw_episodes(axis, world, episodes) -> None:
     from worldagent.envs.harvest.render import draw_episodes as draw
 
@@ -219,7 +226,7 @@ SPEC = register(
             default_descriptors=("wall_share", "apple_clustering"),
         ),
         trace=trace,
-        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet),
+        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate),
         scripted={"random": uniform, "greedy": greedy},
         algorithms=("dqn",),
         presets={

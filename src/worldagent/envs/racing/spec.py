@@ -160,6 +160,13 @@ def world_picture(world, size: int):
     return track_image(world, size=size)
 
 
+def locate(positions, world, size: int):
+    """Pixel (x, y) of normalised positions on ``world_picture`` (it always shows the same square)."""
+    from worldagent.envs.racing.render import _xy_to_canvas
+
+    return _xy_to_canvas(np.asarray(positions, np.float64), size)
+
+
 def draw_episodes(axis, world, episodes) -> None:
     from worldagent.envs.racing.render import draw_episodes as draw
 
@@ -243,7 +250,7 @@ SPEC = register(
             default_descriptors=("total_curvature", "sharpest_corner"),
         ),
         trace=trace,
-        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet),
+        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate),
         scripted={"driver": driver, "random": uniform},
         algorithms=("ppo", "acktr"),
         algorithm_overrides=TRAINING_SETTINGS,

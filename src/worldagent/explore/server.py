@@ -1,0 +1,277 @@
+"""The explorer's web server (FastAPI): the page, its assets, and a JSON/PNG API over one run.
+
+Safe by default: ``serve`` binds 127.0.0.1; any other host needs a token, which every request
+then carries (``?token=`` once: the page keeps it in a cookie; or the ``X-Worldagent-Token``
+header). Without a token, requests naming another host than the loopback one are refused (a
+web page elsewhere cannot reach the server through DNS rebinding). Requests are checked
+(latent length, finite and bounded numbers, capped counts, agents and metrics by name from
+the run's own lists): a bad one gets a 4xx with ``{"error": "<one line>"}``. Files come only
+from the package's ``static/`` folder; nothing is unpickled; nothing is written to the run.
+
+API (``ENV``: an environment of the run)::
+
+    GET  /api/run                         the run: environments, metrics, agents, atlases
+    GET  /api/ENV/map                     every stored world: projected latent, campaign, metric means
+    GET  /api/ENV/world/I                 stored world I: campaign, latent, metrics
+    GET  /api/ENV/world/I.png             its picture          (?size=)
+    GET  /api/ENV/decode.png?z=a,b,...    the picture of G(z)  (?size=)
+    POST /api/ENV/play                    {"world": I | "z": [...], "agent", "episodes", "seed", "size"}: episodes played now
+    GET  /api/ENV/failures                failing worlds     (?event=, by=likelihood|severity, limit=)
+    GET  /api/ENV/atlas                   the atlas heat map (?name=)
+    GET  /api/ENV/export.npz|.json        a world as a one-world dataset / JSON  (?world=I or ?z=...)
+"""
+
+import hashlib
+import json
+import math
+import secrets
+from pathlib import Path
+from typing import Annotated, Any, Literal, Self
+
+import numpy as np
+from fastapi import Depends, FastAPI, HTTPException, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, Response
+from pydantic import BaseModel, Field, model_validator
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from worldagent.errors import WorldagentError
+from worldagent.explore.session import RUN_AGENT, EnvSession, Session
+
+STATIC = Path(__file__).parent / "static"
+LATENT_BOUND = 10.0  # |z_i| ≤ 10: the prior puts no mass beyond; larger values only decode the edge world
+MAX_EPISODES = 16
+MAX_SIZE = 768
+MAX_FAILURES = 500
+TOKEN_HEADER = "x-worldagent-token"
+TOKEN_COOKIE = "worldagent_token"
+LOOPBACK = ("127.0.0.1", "localhost", "[::1]")
+
+
+def one_line(text: Any) -> str:
+    return " ".join(str(text).split())
+
+
+def error(status: int, message: str) -> JSONResponse:
+    return JSONResponse({"error": one_line(message)}, status_code=status)
+
+
+def parse_latent(text: str) -> list[float]:
+    """``"0.1,-2,0"`` -> floats (syntax only; ``check_latent`` checks the values)."""
+    try:
+        return [float(part) for part in text.split(",")] if text.strip() else []
+    except ValueError:
+        raise WorldagentError(f"z={text[:40]!r}: write the latent as comma-separated numbers, e.g. z=0,0.5,-1") from None
+
+
+def check_latent(session: EnvSession, z: list[float]) -> np.ndarray:
+    """A finite latent of the environment's size within ±LATENT_BOUND."""
+    if len(z) != session.latent_dim:
+        raise WorldagentError(f"a {session.env} latent has {session.latent_dim} numbers, not {len(z)}.")
+    if not all(math.isfinite(v) for v in z):
+        raise WorldagentError("the latent holds a non-finite number; send finite numbers only.")
+    if max(abs(v) for v in z) > LATENT_BOUND:
+        raise WorldagentError(f"latent values lie within ±{LATENT_BOUND:g}; scale the latent down.")
+    return np.asarray(z, np.float64)
+
+
+class PlayRequest(BaseModel):
+    """Play episodes now: on stored world ``world`` or on G(``z``)."""
+
+    world: int | None = Field(None, ge=0)
+    z: list[float] | None = Field(None, max_length=256)
+    agent: str = Field(RUN_AGENT, max_length=100)
+    episodes: int = Field(8, ge=1, le=MAX_EPISODES)
+    seed: int = Field(0, ge=0, lt=2**31)
+    size: int = Field(384, ge=64, le=MAX_SIZE)
+
+    @model_validator(mode="after")
+    def one_source(self) -> Self:
+        if (self.world is None) == (self.z is None):
+            raise ValueError("give either world (a stored world's index) or z (a latent), not both or neither")
+        return self
+
+
+def make_app(session: Session, token: str | None = None) -> FastAPI:
+    """The explorer over ``session``; with ``token``, every request must carry it."""
+    app = FastAPI(title="worldagent explore", docs_url=None, redoc_url=None, openapi_url=None)
+    install_errors(app)
+    install_guard(app, token)
+
+    def env_session(env: str) -> EnvSession:
+        try:
+            return session.env(env)
+        except KeyError:
+            raise HTTPException(404, f"no environment {env!r} in this run; use one of: {', '.join(session.envs)}.") from None
+
+    Env = Annotated[EnvSession, Depends(env_session)]
+    Size = Annotated[int, Query(ge=32, le=MAX_SIZE)]
+
+    def world_of(env: EnvSession, world: int | None, z: str | None) -> tuple[Any, dict]:
+        """(world, where it came from) of ``?world=I`` or ``?z=...`` (exactly one)."""
+        if (world is None) == (z is None):
+            raise WorldagentError("give either world=I (a stored world) or z=a,b,... (a latent).")
+        if world is not None:
+            return env.stored_world(world), env.world_summary(world)
+        latent = check_latent(env, parse_latent(z))
+        return env.decode(latent), {"latent": latent.tolist()}
+
+    @app.get("/", include_in_schema=False)
+    def index() -> FileResponse:
+        return FileResponse(STATIC / "index.html", media_type="text/html")
+
+    @app.get("/static/{name}", include_in_schema=False)
+    def asset(name: str) -> FileResponse:
+        known = {p.name: p for p in STATIC.iterdir() if p.is_file()}
+        if name not in known:  # only the package's own files, by exact name: no path ever reaches the disk
+            raise HTTPException(404, f"no asset {name!r}.")
+        return FileResponse(known[name])
+
+    @app.get("/api/run")
+    def run_info() -> dict:
+        return session.describe()
+
+    @app.get("/api/{env}/map")
+    def world_map(env: Env) -> dict:
+        return env.map_data()
+
+    @app.get("/api/{env}/world/{index}.png")
+    def world_picture(env: Env, index: int, size: Size = 384) -> Response:
+        return png(env.picture(env.stored_world(index), size))
+
+    @app.get("/api/{env}/world/{index}")
+    def world_info(env: Env, index: int) -> dict:
+        return env.world_summary(index)
+
+    @app.get("/api/{env}/decode.png")
+    def decode_picture(env: Env, z: Annotated[str, Query(max_length=4096)], size: Size = 384) -> Response:
+        return png(env.picture(env.decode(check_latent(env, parse_latent(z))), size))
+
+    @app.post("/api/{env}/play")
+    def play(env: Env, request: PlayRequest) -> dict:
+        if request.world is not None:
+            world, source = env.stored_world(request.world), {"world": request.world}
+        else:
+            latent = check_latent(env, request.z)
+            world, source = env.decode(latent), {"z": latent.tolist()}
+        played = env.play(world, request.agent, request.episodes, request.seed, request.size)
+        return {**played, **source, "agent": request.agent, "seed": request.seed}
+
+    @app.get("/api/{env}/failures")
+    def failures(
+        env: Env,
+        event: Annotated[str | None, Query(max_length=200)] = None,
+        by: Literal["likelihood", "severity"] = "likelihood",
+        limit: Annotated[int, Query(ge=1, le=MAX_FAILURES)] = 50,
+    ) -> dict:
+        return env.failures(event, by, limit)
+
+    @app.get("/api/{env}/atlas")
+    def atlas(env: Env, name: Annotated[str | None, Query(max_length=200)] = None) -> dict:
+        return env.atlas(name)
+
+    @app.get("/api/{env}/export.npz")
+    def export_npz(env: Env, world: Annotated[int | None, Query(ge=0)] = None, z: Annotated[str | None, Query(max_length=4096)] = None) -> Response:
+        found, source = world_of(env, world, z)
+        data = one_world_dataset(env, found)
+        return Response(data, media_type="application/octet-stream", headers=attachment(f"{env.env}-{export_name(source)}.npz"))
+
+    @app.get("/api/{env}/export.json")
+    def export_json(env: Env, world: Annotated[int | None, Query(ge=0)] = None, z: Annotated[str | None, Query(max_length=4096)] = None) -> Response:
+        found, source = world_of(env, world, z)
+        body = {"env": env.env, "source": source, "world": {k: v.tolist() for k, v in env.spec.world_to_arrays(found).items()}}
+        return Response(json.dumps(body), media_type="application/json", headers=attachment(f"{env.env}-{export_name(source)}.json"))
+
+    return app
+
+
+def png(data: bytes) -> Response:
+    return Response(data, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+def attachment(filename: str) -> dict:
+    return {"Content-Disposition": f'attachment; filename="{filename}"'}
+
+
+def export_name(source: dict) -> str:
+    """``world-17``, or ``z-<hash>`` of a latent: a file name that says which world it is."""
+    if "index" in source:
+        return f"world-{source['index']}"
+    return "z-" + hashlib.sha256(json.dumps(source["latent"]).encode()).hexdigest()[:10]
+
+
+def one_world_dataset(env: EnvSession, world: Any) -> bytes:
+    """The world as a one-world ``WorldDataset`` file (``WorldDataset.load`` reads it; seed -1: not generated)."""
+    from worldagent.worlds.dataset import WorldDataset
+
+    spec = env.spec
+    batched = spec.world_from_arrays({k: v[None] for k, v in spec.world_to_arrays(world).items()})
+    dataset = WorldDataset(env.env, np.array([-1], np.int64), batched, np.asarray(spec.cells(batched), np.uint8), tuple(spec.cell_shape))
+    return dataset_bytes(dataset)
+
+
+def dataset_bytes(dataset) -> bytes:
+    """The bytes ``WorldDataset.save`` writes (it writes files only; a temporary one here, never in the run)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = dataset.save(Path(folder) / "world.npz")
+        return path.read_bytes()
+
+
+def install_errors(app: FastAPI) -> None:
+    """Every error as ``{"error": "<one line>"}``: 400 for our refusals, 422 for malformed requests."""
+
+    @app.exception_handler(WorldagentError)
+    async def refused(request: Request, exc: WorldagentError) -> JSONResponse:
+        return error(400, str(exc))
+
+    @app.exception_handler(RequestValidationError)
+    async def malformed(request: Request, exc: RequestValidationError) -> JSONResponse:
+        first = exc.errors()[0] if exc.errors() else {}
+        where = ".".join(str(part) for part in first.get("loc", ()) if part != "body")
+        return error(422, f"{where}: {first.get('msg', 'invalid request')}" if where else first.get("msg", "invalid request"))
+
+    @app.exception_handler(Exception)
+    async def crashed(request: Request, exc: Exception) -> JSONResponse:
+        return error(500, f"the explorer failed on this request ({type(exc).__name__}: {exc}); the server keeps serving.")
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return error(exc.status_code, exc.detail if isinstance(exc.detail, str) else "request refused")
+
+
+def install_guard(app: FastAPI, token: str | None) -> None:
+    """Refuse requests without the token (when there is one), or naming a non-loopback host (when not)."""
+
+    @app.middleware("http")
+    async def guard(request: Request, call_next):
+        if token is None:
+            host = host_name(request.headers.get("host", ""))
+            if host not in LOOPBACK:
+                return error(403, f"host {host!r} refused: the explorer answers 127.0.0.1 only; start it with --host and a token to serve others.")
+            return await call_next(request)
+        given = request.query_params.get("token") or request.headers.get(TOKEN_HEADER) or request.cookies.get(TOKEN_COOKIE) or ""
+        if not secrets.compare_digest(given.encode(), token.encode()):
+            return error(401, "missing or wrong token; open the URL `worldagent explore` printed (it carries ?token=...).")
+        response = await call_next(request)
+        if request.query_params.get("token"):
+            response.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict")
+        return response
+
+
+def host_name(header: str) -> str:
+    """The host of a ``Host`` header, without its port (``[::1]:8765`` -> ``[::1]``)."""
+    return header.split("]")[0] + "]" if header.startswith("[") else header.rsplit(":", 1)[0]
+
+
+def serve(session: Session, host: str = "127.0.0.1", port: int = 8765, token: str | None = None, echo=print) -> None:
+    """Run the explorer until interrupted; a host other than the loopback one needs a token (one is made if not given)."""
+    import uvicorn
+
+    if host not in ("127.0.0.1", "localhost", "::1") and not token:
+        token = secrets.token_urlsafe(18)
+    app = make_app(session, token)
+    shown = f"[{host}]" if ":" in host else host
+    echo(f"worldagent explore: http://{shown}:{port}/" + (f"?token={token}" if token else "") + "  (Ctrl-C stops it)")
+    uvicorn.run(app, host=host, port=port, log_level="warning")

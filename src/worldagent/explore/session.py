@@ -1,0 +1,354 @@
+"""The explorer's state over one run: each environment's stored worlds, its G(z) and its agents.
+
+``Session.open(run_dir)`` reads the run through ``runs.Run``: every evaluation of every store
+(without worlds; a world is read from the store when asked for), their latents, projection and
+metric means. Generators and agents load on first use and stay loaded; every JAX call of an
+environment holds that environment's lock, so concurrent requests never compile one program
+twice. Agents are chosen by label from ``EnvSession.agents``, a fixed list built here (the run's
+agent, the influence phase's agents, the env's scripted ones): a request never names a path.
+"""
+
+from __future__ import annotations
+
+import io
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from worldagent.envs import registry
+from worldagent.errors import WorldagentError
+from worldagent.events import parse_selection
+from worldagent.explore import views
+from worldagent.runs import Run
+
+RUN_AGENT = "run"  # the label of the run's own trained agent
+SAME_LATENT = 1e-9  # latents closer than this are one world (scored again by another campaign), never its own neighbour
+
+
+def agent_sources(run: Run, env: str) -> dict[str, str]:
+    """{label: what ``agents.loaders.load_agent`` reads} of every agent the explorer may play."""
+    spec = registry.get(env)
+    found = {RUN_AGENT: str(run.layout(env).agent_dir)} if run.done(env, "agent") else {}
+    agents_dir = run.layout(env).influence_dir / "agents"
+    if agents_dir.is_dir():
+        found |= {f"influence/{d.name}": str(d) for d in sorted(agents_dir.iterdir()) if (d / "policy").is_dir()}
+    return found | {f"scripted/{name}": name for name in spec.scripted}
+
+
+def png_bytes(image) -> bytes:
+    buffer = io.BytesIO()
+    image.save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+@dataclass
+class EnvSession:
+    """One environment of the run, as the explorer serves it.
+
+    Attributes:
+        run: the run; env: the environment's name.
+        evaluations: every stored evaluation (no worlds), campaign by campaign.
+        latents: f64[n, d]; xy: f64[n, 2] their projection; means: {metric: f64[n]}.
+        agents: {label: source} (``agent_sources``).
+    """
+
+    run: Run
+    env: str
+    evaluations: list
+    latents: np.ndarray
+    projection: views.Projection
+    xy: np.ndarray
+    means: dict[str, np.ndarray]
+    agents: dict[str, str]
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    _loaded: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def open(cls, run: Run, env: str) -> EnvSession:
+        spec = registry.get(env)
+        evaluations = [e for e in run.evaluations(env) if len(e.latent)]
+        dim = run_latent_dim(run, env, evaluations)
+        latents = np.stack([e.latent for e in evaluations]).astype(np.float64) if evaluations else np.zeros((0, dim))
+        projection = views.principal_projection(latents if len(latents) else np.zeros((1, dim)))
+        names = views.scalar_metrics(evaluations, spec.metrics.names)
+        return cls(run, env, evaluations, latents, projection, projection(latents), views.metric_table(evaluations, names), agent_sources(run, env))
+
+    @property
+    def spec(self):
+        return registry.get(self.env)
+
+    @property
+    def latent_dim(self) -> int:
+        return int(self.latents.shape[1])
+
+    def describe(self) -> dict:
+        """What the page needs to lay out this environment's views."""
+        spec = self.spec
+        return {
+            "name": self.env,
+            "latent_dim": self.latent_dim,
+            "worlds": len(self.evaluations),
+            "metrics": list(self.means),
+            "main": spec.metrics.main if spec.metrics.main in self.means else next(iter(self.means), None),
+            "highlighted": [m for m in spec.metrics.highlighted if m in self.means],
+            "failure": spec.failure,
+            "agents": list(self.agents),
+            "has_generator": self.run.layout(self.env).generator_dir.is_dir(),
+            "animates": spec.pictures.locate is not None,
+            "atlases": self.atlas_names(),
+        }
+
+    # -- stored worlds --------------------------------------------------------------------------
+
+    def evaluation(self, index: int):
+        if not 0 <= index < len(self.evaluations):
+            raise WorldagentError(f"world {index} is not stored; pick one of 0..{len(self.evaluations) - 1}.")
+        return self.evaluations[index]
+
+    def stored_world(self, index: int) -> Any:
+        """Stored world ``index``; campaigns that kept no worlds (failure-rate estimates) evaluated G(z), so it is decoded."""
+        found = self.evaluation(index)
+        try:
+            return self.run.world(self.env, found.campaign, found.generation, found.slot)
+        except WorldagentError:
+            return self.decode(found.latent)
+
+    def index_of(self, campaign: str, generation: int, slot: int) -> int:
+        if "index" not in self._loaded:
+            self._loaded["index"] = {(e.campaign, e.generation, e.slot): i for i, e in enumerate(self.evaluations)}
+        return self._loaded["index"][(campaign, int(generation), int(slot))]
+
+    def world_summary(self, index: int) -> dict:
+        found = self.evaluation(index)
+        return {
+            "index": index,
+            "campaign": found.campaign,
+            "generation": found.generation,
+            "slot": found.slot,
+            "latent": [round(float(v), 5) for v in found.latent],
+            "score": finite_or_none(found.score),
+            "episodes": len(found.episodes),
+            "metrics": {name: finite_or_none(values[index]) for name, values in self.means.items()},
+            "log_prior": float(views.log_prior(found.latent[None])[0]),
+        }
+
+    # -- the map, the failures, the atlas ---------------------------------------------------------
+
+    def map_data(self) -> dict:
+        campaigns = list(dict.fromkeys(e.campaign for e in self.evaluations))
+        order = {name: i for i, name in enumerate(campaigns)}
+        return {
+            "x": rounded(self.xy[:, 0]),
+            "y": rounded(self.xy[:, 1]),
+            "campaigns": campaigns,
+            "campaign": [order[e.campaign] for e in self.evaluations],
+            "metrics": {name: rounded(values) for name, values in self.means.items()},
+            "axes": rounded(self.projection.axes),
+            "centre": rounded(self.projection.centre),
+        }
+
+    def failures(self, event: str | None, by: str, limit: int) -> dict:
+        """The failing stored worlds ranked ``by`` likelihood or severity, each with its nearest passing world."""
+        text = event or self.spec.failure
+        if not text:
+            raise WorldagentError(f"{self.env} names no failure event; pass one, e.g. event={next(iter(self.means), 'metric')} < 0.")
+        selection = parse_selection(text, self.env)
+        missing = [m for m in selection.metrics if m not in self.means]
+        if missing:
+            raise WorldagentError(f"the stored worlds have no per-episode {missing[0]!r}; use one of: {', '.join(self.means)}.")
+        failing = selection.mask(self.evaluations) if self.evaluations else np.zeros(0, bool)
+        severity = views.severity(selection, self.means)
+        ranked = views.rank_failures(self.latents, failing, severity, by)[:limit]
+        passing = np.flatnonzero(~failing)
+        near, distance = views.nearest(self.latents[ranked], self.latents[passing], beyond=SAME_LATENT)
+        prior = views.log_prior(self.latents[ranked])
+        rows = [
+            {
+                "index": int(i),
+                "campaign": self.evaluations[i].campaign,
+                "log_prior": float(prior[k]),
+                "severity": float(severity[i]),
+                "metrics": {name: finite_or_none(self.means[name][i]) for name in selection.metrics},
+                "nearest_passing": int(passing[near[k]]) if near[k] >= 0 else None,
+                "distance": finite_or_none(distance[k]),
+            }
+            for k, i in enumerate(ranked)
+        ]
+        return {"event": selection.describe(), "failing": int(failing.sum()), "worlds": len(self.evaluations), "by": by, "rows": rows}
+
+    def atlas_names(self) -> list[str]:
+        if "atlas_names" not in self._loaded:
+            from worldagent.search.atlas import atlas_names
+
+            names = []
+            if self.run.has_store(self.env):
+                with self.run.store(self.env) as store:
+                    names = atlas_names(store)
+            self._loaded["atlas_names"] = names
+        return self._loaded["atlas_names"]
+
+    def atlas(self, name: str | None) -> dict:
+        """The atlas campaign ``name`` (default: the first) as heat-map cells, each with its worst world."""
+        names = self.atlas_names()
+        if not names:
+            raise WorldagentError(f"the {self.env} store holds no atlas; run `worldagent reproduce` with an atlas budget, or `worldagent atlas`.")
+        name = name or names[0]
+        if name not in names:
+            raise WorldagentError(f"no atlas {name!r}; atlases of {self.env}: {', '.join(names)}.")
+        key = f"atlas:{name}"
+        with self.lock:
+            if key not in self._loaded:
+                self._loaded[key] = self._read_atlas(name)
+        return self._loaded[key]
+
+    def _read_atlas(self, name: str) -> dict:
+        from worldagent.search.atlas import read_atlas
+
+        with self.run.store(self.env) as store:
+            atlas = read_atlas(store, name)
+        archive, grid = atlas.archive, atlas.grid
+        cells = views.atlas_cells(archive.cells, grid.cells, archive.scores, atlas.maximize)
+        for cell in cells:
+            best = atlas.evaluations[int(archive.best[cell.pop("entry")])]
+            cell["world"] = self.index_of(best.campaign, best.generation, best.slot)
+        return {
+            "name": name,
+            "descriptors": list(grid.descriptors[:2]),
+            "size": [int(grid.cells[0]), int(grid.cells[1]) if len(grid.cells) > 1 else 1],
+            "ranges": [list(map(float, r)) for r in grid.ranges[:2]],
+            "metric": atlas.campaign.objective,
+            "maximize": atlas.maximize,
+            "cells": cells,
+        }
+
+    # -- G(z) and the agents ---------------------------------------------------------------------
+
+    def generator(self):
+        if "generator" not in self._loaded:
+            import jax
+
+            generator = self.run.generator(self.env)
+            self._loaded["generator"] = (generator, jax.jit(lambda g, z: g(z)))
+        return self._loaded["generator"]
+
+    def check_latent(self, z) -> np.ndarray:
+        z = np.asarray(z, np.float64)
+        if z.shape != (self.latent_dim,):
+            raise WorldagentError(f"a {self.env} latent has {self.latent_dim} numbers, not {z.size}.")
+        return z
+
+    def decode(self, z) -> Any:
+        """The world G(z) (unbatched) of one latent."""
+        import jax
+
+        z = self.check_latent(z)
+        with self.lock:
+            generator, decode = self.generator()
+            worlds = decode(generator, np.asarray(z[None], np.float32))
+            return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[0]), worlds)
+
+    def picture(self, world: Any, size: int) -> bytes:
+        return png_bytes(self.spec.pictures.world(world, size).convert("RGB"))
+
+    def setup(self, agent: str):
+        """``experiments.Setup`` of one agent label (loaded once)."""
+        if agent not in self.agents:
+            raise WorldagentError(f"no agent {agent!r} in this run; use one of: {', '.join(self.agents)}.")
+        key = f"agent:{agent}"
+        if key not in self._loaded:
+            from worldagent import experiments
+
+            self._loaded[key] = experiments.setup(self.env, self.agents[agent], self.generator()[0], options=None)
+        return self._loaded[key]
+
+    def warm_up(self, episodes: int = 8) -> None:
+        """Compile G(z) and the default agent's episodes once (what the first click would wait for)."""
+        if not self.describe()["has_generator"]:
+            return
+        world = self.decode(np.zeros(self.latent_dim))
+        if self.agents:
+            self.play(world, next(iter(self.agents)), episodes, 0, 64)
+
+    def play(self, world: Any, agent: str, episodes: int, seed: int, size: int) -> dict:
+        """Play ``episodes`` episodes of ``agent`` on ``world`` now; where the agents went, as pixels on its picture."""
+        import jax
+
+        from worldagent.evaluation.trajectories import replay
+
+        with self.lock:
+            setup = self.setup(agent)
+            keys = jax.random.split(jax.random.key(int(seed)), int(episodes))
+            played = replay(self.spec, setup.env, setup.policy, world, keys, setup.params)
+        return episodes_payload(self.spec, world, played, setup.params, size)
+
+
+def episodes_payload(spec, world: Any, played, params: Any, size: int) -> dict:
+    """JSON of replayed episodes: per episode its path in picture pixels [steps + 1][agents][2], who is on the map, its metrics."""
+    positions, present = played.positions, played.present
+    if positions.ndim == 3:  # one agent: [E, T+1, 2] -> [E, T+1, 1, 2]
+        positions, present = positions[:, :, None], present[:, :, None]
+    pixels = np.asarray(spec.pictures.locate(positions, world, size)) if spec.pictures.locate else None
+    metrics = spec.metrics.with_derived({k: np.asarray(v) for k, v in played.metrics.items()}, params)
+    runs = []
+    for e in range(len(played)):
+        end = int(played.steps[e]) + 1
+        runs.append(
+            {
+                "steps": int(played.steps[e]),
+                "path": None if pixels is None else np.round(pixels[e, :end], 1).tolist(),
+                "present": np.asarray(present[e, :end]).astype(int).tolist(),
+                "metrics": {name: np.round(np.asarray(v[e], np.float64), 4).tolist() for name, v in metrics.items()},
+            }
+        )
+    means = {name: float(np.mean(np.asarray(v, np.float64))) for name, v in metrics.items()}
+    return {"size": size, "episodes": runs, "means": means}
+
+
+def run_latent_dim(run: Run, env: str, evaluations: list) -> int:
+    """The latent size: the stored latents', else the generator's."""
+    if evaluations:
+        return len(evaluations[0].latent)
+    if run.layout(env).generator_dir.is_dir():
+        return run.generator(env).latent_dim
+    raise WorldagentError(f"{run.run_dir} has neither stored worlds nor a generator for {env}; run `worldagent reproduce --out {run.run_dir}`.")
+
+
+def finite_or_none(value) -> float | None:
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
+def rounded(values: np.ndarray, digits: int = 4) -> list:
+    """Numbers for JSON: rounded, NaN as null."""
+    array = np.round(np.asarray(values, np.float64), digits)
+    return np.where(np.isfinite(array), array, None).tolist()
+
+
+@dataclass
+class Session:
+    """The explorer's run: one ``EnvSession`` per environment (``Session.open``)."""
+
+    run: Run
+    envs: dict[str, EnvSession]
+
+    @classmethod
+    def open(cls, run_dir: Path | str) -> Session:
+        run = Run.open(run_dir)
+        return cls(run, {env: EnvSession.open(run, env) for env in run.require_envs()})
+
+    def env(self, name: str) -> EnvSession:
+        if name not in self.envs:
+            raise KeyError(name)
+        return self.envs[name]
+
+    def describe(self) -> dict:
+        manifest = self.run.manifest
+        return {
+            "run_dir": str(self.run.run_dir),
+            "preset": manifest.get("preset"),
+            "seed": manifest.get("seed"),
+            "envs": [env.describe() for env in self.envs.values()],
+        }

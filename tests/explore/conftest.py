@@ -1,0 +1,95 @@
+"""A tiny run directory of the toy gridworld, written by hand in a few seconds, for the explorer's tests.
+
+It holds what ``reproduce`` would leave: a manifest naming the env, a dataset and a generator
+(an untrained VAE: its repair still makes every G(z) a valid world; training would cost seconds), and a store with a random campaign (some worlds failing:
+``reached < 0.5``) and an atlas campaign over the toy's descriptors. No trained agent: the
+explorer plays the toy's scripted ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from worldagent.envs import registry
+from worldagent.runs import RunLayout
+
+WORLDS = 24  # stored evaluations per campaign
+ATLAS_CELLS = (3, 3)
+
+
+def cell_centres(positions, world, size: int):
+    """The toy's (row, col) cells as pixel (x, y) centres on its picture (what a spec's ``locate`` gives)."""
+    side = np.shape(world.walls)[-1]
+    cells = np.asarray(positions, np.float64)
+    return np.stack([(cells[..., 1] + 0.5) * size / side, (cells[..., 0] + 0.5) * size / side], axis=-1)
+
+
+@pytest.fixture(scope="session")
+def toy_spec():
+    """The toy env, with a picture locator and a failure event, registered for the session."""
+    import toy_env
+
+    spec = dataclasses.replace(toy_env.SPEC, pictures=dataclasses.replace(toy_env.SPEC.pictures, locate=cell_centres), failure="reached < 0.5")
+    added = spec.name not in registry.names()
+    registry.register(spec, replace=True)
+    yield spec
+    registry.unregister(spec.name) if added else registry.register(toy_env.SPEC, replace=True)
+
+
+def fake_episodes(rng, failing: bool) -> list[dict]:
+    """4 episodes' metrics; a failing world reaches the goal in at most one of them."""
+    reached = rng.random(4) < (0.2 if failing else 0.9)
+    return [{"return": float(9.0 * r - 0.3 * s), "reached": float(r), "steps": float(s)} for r, s in zip(reached, rng.integers(3, 30, 4))]
+
+
+def store_campaign(store, spec, dataset, name: str, config: dict, latents: np.ndarray, rng) -> None:
+    campaign = store.open_campaign(name, spec.name, "return", False, "random", len(latents), 0, config, resume=False)
+    for slot, z in enumerate(latents):
+        world = dataset.world(slot % len(dataset))
+        episodes = fake_episodes(rng, failing=slot % 3 == 0)
+        store.add(campaign, 0, slot, z, float(np.mean([e["return"] for e in episodes])), episodes, 0.0, world=world)
+
+
+@pytest.fixture(scope="session")
+def toy_run(toy_spec, tmp_path_factory):
+    """The run directory (see the module docstring)."""
+    from worldagent.search.atlas import Grid
+    from worldagent.store import RunStore
+    from worldagent.worlds.dataset import make_dataset
+    from worldagent.worlds.generator import build_generator, save_generator
+    from worldagent.worlds.vae import TrainedVAE, VAEConfig, make_vae
+
+    run_dir = tmp_path_factory.mktemp("explore") / "run"
+    layout = RunLayout(run_dir, toy_spec.name)
+    dataset = make_dataset(toy_spec.name, 64, 0, progress=False)
+    layout.dir.mkdir(parents=True)
+    dataset.save(layout.dataset_path)
+    config = VAEConfig(encoder=(16,), decoder=(16,), latent_dim=3)
+    model = make_vae(toy_spec.cell_count, config)
+    shapes = jax.eval_shape(model.init, jax.random.key(0), np.zeros((1, toy_spec.cell_count), np.float32), jax.random.key(1))["params"]
+    weights = np.random.default_rng(1)  # random weights of the right shapes: tracing is enough, no init to compile
+    params = jax.tree_util.tree_map(lambda leaf: weights.normal(0.0, 0.5, leaf.shape).astype(leaf.dtype), shapes)
+    vae = TrainedVAE(model, params, config, toy_spec.name, toy_spec.cell_shape, dataset.fingerprint, [], np.zeros(0, np.int64))
+    save_generator(layout.generator_dir, vae, layout.dataset_path, build_generator(vae, dataset))
+    rng = np.random.default_rng(0)
+    grid = Grid(toy_spec.metrics.default_descriptors, ATLAS_CELLS, ((0.0, 0.5), (0.0, 12.0)))
+    with RunStore(layout.store_path) as store:
+        store_campaign(store, toy_spec, dataset, "random-return-s0", {}, rng.normal(size=(WORLDS, 3)), rng)
+        store_campaign(store, toy_spec, dataset, "atlas-min-return-s0", {"atlas": {"grid": grid.record()}}, rng.normal(size=(WORLDS, 3)), rng)
+    done = {"status": "done", "config": {}, "outputs": {}}
+    manifest = {"format_version": 1, "preset": "test", "seed": 0, "envs": [toy_spec.name], "phases": {f"{toy_spec.name}/generator": done}}
+    (run_dir / "manifest.json").write_text(json.dumps(manifest))
+    return run_dir
+
+
+@pytest.fixture(scope="session")
+def session(toy_run):
+    """The explorer's ``Session`` over the toy run (its generator and agents load on first use)."""
+    from worldagent.explore.session import Session
+
+    return Session.open(toy_run)

@@ -1,0 +1,224 @@
+"""The explorer's API over a tiny toy run: every view's numbers, exports, and refusals as one-line JSON."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from worldagent.explore.server import make_app
+from worldagent.store import RunStore
+from worldagent.worlds.dataset import WorldDataset
+
+LOCAL = "http://127.0.0.1"
+
+
+@pytest.fixture(scope="module")
+def client(session):
+    return TestClient(make_app(session), base_url=LOCAL)
+
+
+def stored(toy_run, campaign=None):
+    with RunStore(toy_run / "toy" / "store.sqlite", create=False) as store:
+        return store.evaluations(campaign, with_worlds=True)
+
+
+def file_hashes(folder) -> dict:
+    """sha256 of every file but SQLite's -wal/-shm (opening a store in WAL mode makes them; its data stays)."""
+    return {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file() and not p.name.endswith(("-wal", "-shm"))}
+
+
+def test_the_page_and_its_assets_are_served(client):
+    page = client.get("/")
+    assert page.status_code == 200 and "/static/explorer.js" in page.text
+    assert client.get("/static/explorer.js").status_code == 200
+    assert client.get("/static/explorer.css").headers["content-type"].startswith("text/css")
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/static/..%2f..%2f..%2fpyproject.toml",
+        "/static/%2e%2e%2fserver.py",
+        "/static/../server.py",
+        "/static/..\\server.py",
+        "/api/toy/world/..%2f..%2fmanifest.json",
+        "/api/..%2f..%2fetc%2fpasswd/map",
+        "/runs/manifest.json",
+    ],
+)
+def test_paths_outside_the_assets_are_not_served(client, path):
+    response = client.get(path)
+    assert 400 <= response.status_code < 500
+    assert set(response.json()) == {"error"}
+
+
+def test_the_run_says_what_each_view_can_show(client):
+    (env,) = client.get("/api/run").json()["envs"]
+    assert env["name"] == "toy" and env["latent_dim"] == 3 and env["worlds"] == 48
+    assert env["metrics"] == ["return", "reached", "steps"] and env["main"] == "return"
+    assert env["agents"] == ["scripted/random", "scripted/homing"]  # no trained agent in this run
+    assert env["atlases"] == ["atlas-min-return-s0"] and env["animates"] and env["failure"] == "reached < 0.5"
+
+
+def test_the_map_places_every_stored_world_by_its_latent(client, toy_run):
+    found = client.get("/api/toy/map").json()
+    evaluations = stored(toy_run)
+    assert found["campaigns"] == ["random-return-s0", "atlas-min-return-s0"]
+    latents = np.stack([e.latent for e in evaluations])
+    expected = (latents - np.asarray(found["centre"])) @ np.asarray(found["axes"]).T
+    np.testing.assert_allclose(np.stack([found["x"], found["y"]], axis=1), expected, atol=1e-3)
+    assert np.var(found["x"]) >= np.var(found["y"])  # the first principal axis spreads the most
+    means = [np.mean([ep["reached"] for ep in e.episodes]) for e in evaluations]
+    np.testing.assert_allclose(found["metrics"]["reached"], means, atol=1e-4)
+
+
+def test_a_stored_world_and_its_picture(client, toy_run):
+    first = stored(toy_run)[5]
+    info = client.get("/api/toy/world/5").json()
+    assert (info["campaign"], info["slot"]) == (first.campaign, first.slot)
+    np.testing.assert_allclose(info["latent"], first.latent, atol=1e-5)
+    picture = client.get("/api/toy/world/5.png?size=64")
+    assert picture.headers["content-type"] == "image/png" and picture.content[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_latent_decodes_to_a_picture(client, session):
+    picture = client.get("/api/toy/decode.png?z=0.5,-1,2&size=96")
+    assert picture.status_code == 200 and picture.content[:4] == b"\x89PNG"
+    expected = session.envs["toy"].picture(session.envs["toy"].decode([0.5, -1, 2]), 96)
+    assert picture.content == expected
+
+
+def test_play_returns_each_episode_on_the_picture(client):
+    request = {"world": 3, "agent": "scripted/homing", "episodes": 3, "seed": 7, "size": 70}
+    played = client.post("/api/toy/play", json=request).json()
+    assert len(played["episodes"]) == 3 and played["agent"] == "scripted/homing"
+    for episode in played["episodes"]:
+        path = np.asarray(episode["path"])
+        assert path.shape == (episode["steps"] + 1, 1, 2)
+        assert ((path >= 0) & (path <= 70)).all()
+        np.testing.assert_allclose(path[0, 0], [5.0, 5.0])  # the start cell (0, 0), 10 px per cell
+    assert played == client.post("/api/toy/play", json=request).json()  # the same seed plays the same episodes
+    latent = client.post("/api/toy/play", json={"z": [0, 0, 0], "agent": "scripted/random", "episodes": 1}).json()
+    assert latent["z"] == [0, 0, 0] and set(latent["means"]) >= {"return", "reached", "steps"}
+
+
+def test_failures_rank_by_prior_likelihood_and_severity(client, toy_run):
+    evaluations = stored(toy_run)
+    reached = np.array([np.mean([e["reached"] for e in ev.episodes]) for ev in evaluations])
+    latents = np.stack([ev.latent for ev in evaluations])
+    found = client.get("/api/toy/failures?limit=500").json()
+    assert found["failing"] == int((reached < 0.5).sum()) == len(found["rows"])
+    priors = [row["log_prior"] for row in found["rows"]]
+    assert priors == sorted(priors, reverse=True)
+    np.testing.assert_allclose(priors[0], -0.5 * (latents[found["rows"][0]["index"]] ** 2).sum() - 1.5 * np.log(2 * np.pi))
+    passing = np.flatnonzero(reached >= 0.5)
+    for row in found["rows"]:
+        distances = np.linalg.norm(latents[passing] - latents[row["index"]], axis=1)
+        assert row["nearest_passing"] == passing[np.argmin(distances)]
+    severe = client.get("/api/toy/failures?by=severity&limit=500").json()["rows"]
+    assert [r["severity"] for r in severe] == sorted((0.5 - reached[reached < 0.5]).tolist(), reverse=True)
+    other = client.get("/api/toy/failures", params={"event": "steps > 20"}).json()
+    assert other["failing"] == int((np.array([np.mean([e["steps"] for e in ev.episodes]) for ev in evaluations]) > 20).sum())
+
+
+def test_an_atlas_cell_opens_its_worst_world(client, toy_run):
+    atlas = client.get("/api/toy/atlas").json()
+    assert atlas["descriptors"] == ["wall_share", "goal_distance"] and atlas["size"] == [3, 3]
+    assert atlas["cells"]
+    evaluations = stored(toy_run)
+    for cell in atlas["cells"]:
+        world = evaluations[cell["world"]]
+        assert world.campaign == "atlas-min-return-s0"
+        assert world.score == pytest.approx(cell["score"])
+    scores = {e.score for e in evaluations if e.campaign == "atlas-min-return-s0"}
+    assert min(scores) == pytest.approx(min(c["score"] for c in atlas["cells"]))  # the worst world heads some cell
+
+
+def test_exports_load_back_as_a_dataset_and_as_json(client, toy_run, tmp_path, toy_spec):
+    world = stored(toy_run)[4].world
+    response = client.get("/api/toy/export.npz?world=4")
+    assert "attachment" in response.headers["content-disposition"]
+    (tmp_path / "w.npz").write_bytes(response.content)
+    dataset = WorldDataset.load(tmp_path / "w.npz", env="toy")
+    assert len(dataset) == 1
+    for name, value in toy_spec.world_to_arrays(dataset.world(0)).items():
+        np.testing.assert_array_equal(value, world[name])
+    as_json = client.get("/api/toy/export.json?world=4").json()
+    assert as_json["env"] == "toy" and as_json["source"]["index"] == 4
+    rebuilt = toy_spec.world_from_arrays({k: np.asarray(v) for k, v in as_json["world"].items()})
+    np.testing.assert_array_equal(np.asarray(rebuilt.walls), world["walls"])
+    decoded = client.get("/api/toy/export.npz?z=0,0,0")
+    assert WorldDataset._from_arrays(dict(np.load(io.BytesIO(decoded.content))), tmp_path, "toy", "") is not None
+
+
+BAD = [
+    ("get", "/api/toy/decode.png?z=1,2", None, 400, "3 numbers"),
+    ("get", "/api/toy/decode.png?z=1,nan,2", None, 400, "non-finite"),
+    ("get", "/api/toy/decode.png?z=1,inf,2", None, 400, "non-finite"),
+    ("get", "/api/toy/decode.png?z=1,2,1e6", None, 400, "±10"),
+    ("get", "/api/toy/decode.png?z=a,b,c", None, 400, "comma-separated"),
+    ("get", "/api/toy/decode.png?z=0,0,0&size=100000", None, 422, "size"),
+    ("get", "/api/toy/world/999", None, 400, "not stored"),
+    ("get", "/api/toy/world/-1", None, 400, "not stored"),
+    ("get", "/api/nowhere/map", None, 404, "no environment"),
+    ("get", "/api/toy/failures?by=luck", None, 422, "by"),
+    ("get", "/api/toy/failures?limit=0", None, 422, "limit"),
+    ("get", "/api/toy/failures?event=reached%20%3E", None, 400, "reached"),
+    ("get", "/api/toy/failures?event=speed%20%3E%201", None, 400, "speed"),
+    ("get", "/api/toy/atlas?name=elsewhere", None, 400, "no atlas"),
+    ("get", "/api/toy/export.npz", None, 400, "either world"),
+    ("post", "/api/toy/play", {"world": 0, "episodes": 17}, 422, "episodes"),
+    ("post", "/api/toy/play", {"world": 0, "episodes": 0}, 422, "episodes"),
+    ("post", "/api/toy/play", {"world": 0, "seed": -1}, 422, "seed"),
+    ("post", "/api/toy/play", {"world": 0, "agent": "run"}, 400, "no agent"),
+    ("post", "/api/toy/play", {"world": 0, "agent": "/etc/passwd"}, 400, "no agent"),
+    ("post", "/api/toy/play", {"world": 0, "agent": "os:system"}, 400, "no agent"),
+    ("post", "/api/toy/play", {"world": 0, "z": [0, 0, 0]}, 422, "either world"),
+    ("post", "/api/toy/play", {"z": [0, 0]}, 400, "3 numbers"),
+    ("post", "/api/toy/play", {"z": [0, 0, 1e300]}, 400, "±10"),
+    ("post", "/api/toy/play", {"z": "0,0,0"}, 422, "z"),
+]
+
+
+@pytest.mark.parametrize(("method", "path", "body", "status", "says"), BAD, ids=[f"{m} {p} {b}" for m, p, b, *_ in BAD])
+def test_a_bad_request_gets_a_one_line_json_error(client, method, path, body, status, says):
+    response = client.request(method.upper(), path, json=body)
+    assert response.status_code == status
+    message = response.json()["error"]
+    assert says in message and "\n" not in message
+    assert client.get("/api/run").status_code == 200  # and the server keeps serving
+
+
+def test_malformed_json_is_refused(client):
+    response = client.post("/api/toy/play", content=b"{not json", headers={"content-type": "application/json"})
+    assert response.status_code == 422 and "\n" not in response.json()["error"]
+
+
+def test_a_token_guards_every_request(session):
+    guarded = TestClient(make_app(session, token="s3cret"), base_url="http://192.0.2.1")
+    assert guarded.get("/api/run").status_code == 401
+    assert guarded.get("/").json()["error"].startswith("missing or wrong token")
+    assert guarded.get("/api/run", headers={"x-worldagent-token": "wrong"}).status_code == 401
+    assert guarded.get("/api/run", headers={"x-worldagent-token": "s3cret"}).status_code == 200
+    page = guarded.get("/?token=s3cret")
+    assert page.status_code == 200 and "httponly" in page.headers["set-cookie"].lower()
+    assert guarded.get("/api/toy/map").status_code == 200  # the page's cookie carries the token on
+
+
+def test_without_a_token_only_the_loopback_host_is_answered(session):
+    foreign = TestClient(make_app(session), base_url="http://attacker.example")
+    response = foreign.get("/api/run")
+    assert response.status_code == 403 and "127.0.0.1" in response.json()["error"]
+
+
+def test_exploring_writes_nothing_to_the_run(toy_run, session):
+    before = file_hashes(toy_run)
+    client = TestClient(make_app(session), base_url=LOCAL)
+    for path in ("/api/toy/map", "/api/toy/world/1.png", "/api/toy/failures", "/api/toy/atlas", "/api/toy/export.npz?world=1"):
+        assert client.get(path).status_code == 200
+    assert client.post("/api/toy/play", json={"world": 1, "agent": "scripted/random", "episodes": 1}).status_code == 200
+    assert file_hashes(toy_run) == before

@@ -1,0 +1,186 @@
+"""The explorer in a real browser (Playwright driving Debian's chromium): ``pytest -m browser``.
+
+Loads the page with no console errors, opens a world from the map, moves a latent slider and
+sees the world redraw, presses play and sees the animation advance, opens a world from an atlas
+cell and from the failures table, and exports a world that loads back as a ``WorldDataset``.
+
+By default it runs over the toy run of ``conftest.py``. ``WORLDAGENT_EXPLORER_RUN=runs/quick``
+(and ``WORLDAGENT_EXPLORER_ENV=racing``) runs it over a real run instead;
+``WORLDAGENT_EXPLORER_SHOTS=docs/images`` saves a screenshot of each view there (the README's).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = os.environ.get("WORLDAGENT_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+WAIT_MS = 120_000  # a real run's first play compiles its agent
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def explorer_url(request):
+    """The explorer serving the toy run (or ``WORLDAGENT_EXPLORER_RUN``) on a free local port, in a thread."""
+    import uvicorn
+
+    from worldagent.explore.server import make_app
+    from worldagent.explore.session import Session
+
+    run_dir = os.environ.get("WORLDAGENT_EXPLORER_RUN") or request.getfixturevalue("toy_run")
+    port = free_port()
+    server = uvicorn.Server(uvicorn.Config(make_app(Session.open(run_dir)), host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert server.started, "the explorer did not start within 30 s"
+    yield f"http://127.0.0.1:{port}/"
+    server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    playwright = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists() and not shutil.which("chromium"):
+        pytest.fail(f"no chromium at {CHROMIUM}; install it (`apt-get install -y chromium`) or set WORLDAGENT_CHROMIUM.")
+    with playwright.sync_playwright() as p:
+        launched = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield launched
+        launched.close()
+
+
+@pytest.fixture
+def page(browser, explorer_url):
+    """A fresh page on the explorer, failing the test on any console error or uncaught exception."""
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    errors: list[str] = []
+    page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    env = os.environ.get("WORLDAGENT_EXPLORER_ENV", "")
+    page.goto(explorer_url + (f"#env={env}" if env else ""))
+    page.wait_for_selector("body[data-ready='1']", timeout=WAIT_MS)
+    yield page
+    page.close()
+    assert not errors, f"console errors: {errors}"
+
+
+def shot(page, name: str) -> None:
+    folder = os.environ.get("WORLDAGENT_EXPLORER_SHOTS")
+    if folder:
+        page.screenshot(path=str(Path(folder) / f"explorer-{name}.png"))
+
+
+def click_canvas(page, selector: str, x: float, y: float) -> None:
+    """Click at (x, y) pixels of a canvas as a user would (through the mouse, not a synthetic event)."""
+    box = page.locator(selector).bounding_box()
+    page.mouse.click(box["x"] + x, box["y"] + y)
+
+
+def open_world_from_map(page, index: int) -> tuple[float, float]:
+    """Hover world ``index``'s dot, then click it; returns where (stacked dots: the first of them opens)."""
+    x, y = page.evaluate(f"explorer.state.screen[{index}]")
+    box = page.locator("#map-canvas").bounding_box()
+    page.mouse.move(box["x"] + x, box["y"] + y)
+    page.wait_for_selector("#map-hover:not([hidden])")
+    page.wait_for_function("document.querySelector('#map-hover-img').complete")
+    shot(page, "map")
+    click_canvas(page, "#map-canvas", x, y)
+    page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
+    return x, y
+
+
+def test_map_world_sliders_and_play(page):
+    points = int(page.get_attribute("#map-canvas", "data-points"))
+    assert points > 0
+    x, y = open_world_from_map(page, points // 2)
+    opened = int(page.text_content("#world-title").split()[1])
+    ox, oy = page.evaluate(f"explorer.state.screen[{opened}]")
+    assert abs(ox - x) < 3 and abs(oy - y) < 3  # the world under the pointer (dots overlap; a click lands on whole pixels)
+    assert f"/world/{opened}.png" in page.get_attribute("#world-img", "data-src")
+
+    slider = page.locator("#sliders input").first
+    slider.focus()
+    for _ in range(8):
+        page.keyboard.press("ArrowRight")
+    page.wait_for_function("(document.querySelector('#world-img').dataset.src || '').includes('/decode.png?z=')", timeout=WAIT_MS)
+    page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
+    assert "G(z)" in page.text_content("#world-title")
+
+    agents = page.eval_on_selector_all("#agent2 option", "options => options.map(o => o.value)")
+    page.select_option("#agent2", agents[-1])
+    page.click("#play")
+    page.wait_for_function("Number(document.querySelector('#world-canvas').dataset.frame) > 0", timeout=WAIT_MS)
+    first = int(page.get_attribute("#world-canvas", "data-frame"))
+    page.wait_for_function(
+        f"Number(document.querySelector('#world-canvas').dataset.frame) > {first} || "
+        "document.querySelector('#frame').textContent === document.querySelector('#frames').textContent",
+        timeout=WAIT_MS,
+    )
+    page.wait_for_function("document.querySelector('#frame').textContent === document.querySelector('#frames').textContent", timeout=WAIT_MS)
+    painted = page.evaluate(
+        "(() => { const c = document.querySelector('#world-canvas'); const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+        " let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n; })()"
+    )
+    assert painted > 50  # trails and agents were drawn over the world
+    assert page.locator("#metrics-1 tr").count() > 1 and page.locator("#metrics-2 tr").count() > 1
+    shot(page, "world")
+
+
+def test_an_atlas_cell_opens_its_world(page):
+    page.click("button[data-view='atlas']")
+    page.wait_for_function("Number(document.querySelector('#atlas-canvas').dataset.cells) > 0", timeout=WAIT_MS)
+    shot(page, "atlas")
+    cell = page.evaluate("explorer.state.atlas.cells[0]")
+    cols, rows = page.evaluate("explorer.state.atlas.size")
+    box = page.locator("#atlas-canvas").bounding_box()
+    x = (cell["x"] + 0.5) * box["width"] / cols
+    y = (rows - cell["y"] - 0.5) * box["height"] / rows
+    click_canvas(page, "#atlas-canvas", x, y)
+    page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
+    assert page.text_content("#world-title").startswith(f"world {cell['world']} ")
+
+
+def test_a_failure_opens_and_exports(page, tmp_path):
+    from worldagent.worlds.dataset import WorldDataset
+
+    page.click("button[data-view='failures']")
+    page.wait_for_selector("#failures-table img", timeout=WAIT_MS)
+    page.wait_for_function("[...document.querySelectorAll('#failures-table img')].slice(0, 6).every(i => i.naturalWidth > 0)", timeout=WAIT_MS)
+    shot(page, "failures")
+    first = page.locator("#failures-table img").first
+    index = int(first.get_attribute("data-world"))
+    first.click()
+    page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
+    assert page.text_content("#world-title").startswith(f"world {index} ")
+    with page.expect_download() as download:
+        page.click("#export-npz")
+    path = tmp_path / "world.npz"
+    download.value.save_as(path)
+    assert len(WorldDataset.load(path)) == 1
+    assert f"w={index}" in page.get_attribute("#permalink", "href")

@@ -25,12 +25,11 @@ TINY_PPO = PPOConfig(total_episodes=48, num_envs=8, num_steps=16, num_minibatche
 
 
 def buffer_with(scores, dim: int = 2, size: int | None = None) -> buffer_lib.Buffer:
-    """A buffer holding one new latent per score (latent i = (i, i, ...)), in order."""
-    scores = np.asarray(scores, np.float32)
-    n = len(scores)
-    z = jnp.repeat(jnp.arange(n, dtype=jnp.float32)[:, None], dim, axis=1)
-    empty = buffer_lib.empty(size or n, dim)
-    return buffer_lib.record(empty, z, jnp.full(n, -1), jnp.asarray(scores), jnp.ones(n, bool), window=1)
+    """A buffer that saw one new latent per score (latent i = (i, i, ...)), one episode at a time."""
+    buffer = buffer_lib.empty(size or len(scores), dim)
+    for i, score in enumerate(scores):
+        buffer = buffer_lib.record(buffer, jnp.full((1, dim), float(i)), jnp.array([-1]), jnp.array([score], jnp.float32), jnp.array([True]), 1)
+    return buffer
 
 
 def test_a_full_buffer_keeps_the_highest_scores_and_updates_replayed_latents_in_place():
@@ -46,6 +45,16 @@ def test_a_full_buffer_keeps_the_highest_scores_and_updates_replayed_latents_in_
     assert int(averaged.count[slot]) == 2 and int(averaged.last[slot]) == int(averaged.clock) == 6
     evicted = buffer_lib.record(buffer, z + 100.0, jnp.array([slot]), jnp.array([0.01]), jnp.array([True]), window=1)
     assert float(evicted.score[slot]) == pytest.approx(0.3)  # the slot no longer holds that latent: a new one, too weak to enter
+
+
+def test_a_batch_enters_as_its_best_over_the_weakest_slots_and_worlds_in_play_find_their_slot():
+    buffer = buffer_with([0.2, 0.6], size=3)
+    z = jnp.array([[5.0, 5.0], [6.0, 6.0], [7.0, 7.0], [8.0, 8.0]])
+    batch = buffer_lib.record(buffer, z, jnp.full(4, -1), jnp.array([0.1, 0.9, 0.4, 0.3]), jnp.array([True, True, True, False]), 1)
+    assert sorted(np.asarray(batch.score).tolist()) == pytest.approx([0.4, 0.6, 0.9])  # 0.3 is padding, 0.1 and 0.2 lose
+    assert int(batch.clock) == 2 + 3
+    slots = buffer_lib.locate(batch, jnp.array([[6.0, 6.0], [5.0, 5.0]]), jnp.array([-1, -1]))
+    assert float(batch.score[int(slots[0])]) == pytest.approx(0.9) and int(slots[1]) == -1  # 5 never entered
 
 
 def test_replay_probabilities_are_rank_based_and_mixed_with_staleness():

@@ -190,18 +190,31 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
     potential = positive_value_loss(targets, trajectory.value)
 
     def one_step(carry, step):
-        z, slot, total, steps = carry
+        z, slot, total, steps, on_pending, pending_sum, pending_count = carry
         step_potential, done, metrics = step
         total, steps = total + step_potential, steps + 1.0
-        ended = (z, slot, curriculum.episode_score(total / steps, metrics), done)
-        switch = lambda new, old: jnp.where(done.reshape(-1, *[1] * (old.ndim - 1)), new, old)  # noqa: E731
-        carry = (switch(runner.pending_z, z), switch(runner.pending_slot, slot), jnp.where(done, 0.0, total), jnp.where(done, 0.0, steps))
+        score = curriculum.episode_score(total / steps, metrics)
+        ended = (z, slot, score, done & ~on_pending)  # the episode on the world the segment began with
+        again = done & on_pending  # the pending world's episodes are pooled into one entry below
+        carry = (
+            jnp.where(done[:, None], runner.pending_z, z), jnp.where(done, runner.pending_slot, slot),
+            jnp.where(done, 0.0, total), jnp.where(done, 0.0, steps),
+            on_pending | done, pending_sum + jnp.where(again, score, 0.0), pending_count + again,
+        )  # fmt: skip
         return carry, ended
 
-    start = (runner.z, runner.slot, runner.potential, runner.potential_steps)
-    (z, slot, total, steps), (zs, slots, scores, valid) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
-    flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
-    state = curriculum.update(runner.curriculum, flat(zs), flat(slots), flat(scores), flat(valid))
+    zero = jnp.zeros(runner.slot.shape, jnp.float32)
+    start = (runner.z, runner.slot, runner.potential, runner.potential_steps, zero > 0, zero, zero)
+    carry, (zs, slots, scores, valid) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
+    z, slot, total, steps, _, pending_sum, pending_count = carry
+    # one entry per env for the episodes its pending world ended within the segment (their mean score),
+    # so that a world replayed several times in a segment (short episodes) never enters the buffer twice
+    flat = lambda x, last: jnp.concatenate([x.reshape(-1, *x.shape[2:]), last])  # noqa: E731
+    state = curriculum.update(
+        runner.curriculum, flat(zs, runner.pending_z), flat(slots, runner.pending_slot),
+        flat(scores, pending_sum / jnp.maximum(pending_count, 1.0)), flat(valid, pending_count > 0),
+    )  # fmt: skip
+    slot = curriculum.slot_of(state, z, slot)
     return runner.replace(curriculum=state, z=z, slot=slot, potential=total, potential_steps=steps)
 
 

@@ -294,7 +294,9 @@ def _plot_curriculum(run: OpenRun) -> None:
         from worldagent.reports.curriculum import curriculum_figure
 
         generator = getattr(getattr(run.distribution, "worlds", None), "generator", None)
-        curriculum_figure(snapshots, run.spec, generator, run.out_dir / CURRICULUM_PLOT_FILE, title=run.record["distribution"])
+        target = getattr(getattr(run.distribution, "target", None), "text", None)
+        title = f"curriculum {getattr(run.distribution, 'name', '')}" + (f", target {target}" if target else "")
+        curriculum_figure(snapshots, run.spec, generator, run.out_dir / CURRICULUM_PLOT_FILE, title=title)
 
 
 def train(

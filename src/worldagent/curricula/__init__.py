@@ -7,6 +7,7 @@ program (no host round trip per episode)::
     state = curriculum.init(key)                             # part of the trainer state
     draw = curriculum.sample(state, key, n)                  # next worlds of n envs: z, slot, worlds
     state = curriculum.update(state, z, slot, score, valid)  # after episodes end, with their scores
+    slot = curriculum.slot_of(state, z, slot)                # where the worlds in play now sit in it
     score = curriculum.episode_score(potential, metrics)     # what the trainer measured -> score
 
 Every module in this package with a ``build(worlds, settings, target)`` is a curriculum, found

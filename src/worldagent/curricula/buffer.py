@@ -10,7 +10,7 @@ with staleness (the paper's P_replay = (1 - p) P_S + p P_C), so that old scores 
 
 A latent whose episode ended enters the buffer if there is room or if its score beats the
 lowest one there (which it replaces); a replayed latent (``slot`` >= 0) has its score
-updated in place.
+updated in place. ``record`` takes a whole segment's episodes at once.
 """
 
 from __future__ import annotations
@@ -82,34 +82,52 @@ def draw(buffer: Buffer, key: jax.Array, n: int, temperature: float, staleness: 
     return jax.random.choice(key, buffer.size, (n,), p=probabilities).astype(jnp.int32)
 
 
-def _record_one(buffer: Buffer, episode, window: int) -> Buffer:
-    """One ended episode: update its slot if it was replayed from there, else insert if it earns a slot."""
-    z, slot, score, valid = episode
-    held = (slot >= 0) & jnp.all(buffer.z[jnp.maximum(slot, 0)] == z)  # still there (not evicted since drawn)
-    used = filled(buffer)
-    worst = jnp.argmin(jnp.where(used, buffer.score, jnp.inf))
-    free = jnp.argmin(used)  # first empty slot (0 when full: then ``room`` is False)
-    room = ~jnp.all(used)
-    target = jnp.where(held, slot, jnp.where(room, free, worst))
-    enters = held | room | (score > buffer.score[worst])
-    write = valid & enters
-    count = jnp.where(held, jnp.minimum(buffer.count[target] + 1, window), 1)
-    previous = jnp.where(held, buffer.score[target], score)
-    new_score = previous + (score - previous) / count  # a running mean over the last ``window`` episodes
-    clock = buffer.clock + valid.astype(jnp.int32)
-    put = lambda array, value: jnp.where(write, array.at[target].set(value), array)  # noqa: E731
-    return Buffer(put(buffer.z, z), put(buffer.score, new_score), put(buffer.count, count), put(buffer.last, clock), clock)
-
-
 def record(buffer: Buffer, z: jax.Array, slot: jax.Array, score: jax.Array, valid: jax.Array, window: int) -> Buffer:
-    """The buffer after M ended episodes, in order.
+    """The buffer after M ended episodes, all at once (vectorised: no loop over episodes).
+
+    A replayed latent still in its slot has its score moved toward the mean of this batch's
+    episodes on it, by k / min(count + k, window) (``window`` 1: replaced, as PLR; larger: a
+    running mean of about its last ``window`` episodes). The other episodes' latents compete
+    for slots: the best of them replace empty slots, then the lowest-scoring ones, wherever
+    they score higher, so the buffer ends holding the top scores of both (existing latents
+    keep their slots, so the slots of worlds in play stay valid).
 
     Args:
         z: f32[M, D] each episode's latent.
         slot: i32[M] the slot it was replayed from, or -1 (a new or edited latent).
         score: f32[M] the episode's score.
         valid: bool[M] which entries are episodes (the rest are padding).
-        window: a replayed latent's score is the mean of its last ``window`` episodes (1: the latest).
+        window: see above.
     """
-    buffer, _ = jax.lax.scan(lambda b, e: (_record_one(b, e, window), None), buffer, (z, slot, score, valid))
-    return buffer
+    n = buffer.size
+    safe = jnp.clip(slot, 0, n - 1)
+    held = valid & (slot >= 0) & jnp.all(buffer.z[safe] == z, axis=-1) & (buffer.count[safe] > 0)
+    clock = buffer.clock + valid.sum(dtype=jnp.int32)
+
+    # replayed latents: their scores updated in place
+    k = jnp.zeros(n, jnp.float32).at[safe].add(held.astype(jnp.float32))
+    total = jnp.zeros(n, jnp.float32).at[safe].add(jnp.where(held, score, 0.0))
+    replayed = k > 0
+    weight = jnp.minimum(k / jnp.maximum(jnp.minimum(buffer.count + k, window), 1.0), 1.0)
+    scores = jnp.where(replayed, buffer.score + weight * (total / jnp.maximum(k, 1.0) - buffer.score), buffer.score)
+    counts = jnp.where(replayed, jnp.minimum(buffer.count + k.astype(jnp.int32), window), buffer.count)
+    last = jnp.where(replayed, clock, buffer.last)
+
+    # new latents: the i-th best candidate against the i-th weakest slot (empty slots weakest)
+    candidate = jnp.where(valid & ~held, score, -jnp.inf)
+    best = jnp.argsort(-candidate, stable=True)[: min(n, candidate.shape[0])]
+    weakest = jnp.argsort(jnp.where(counts > 0, scores, -jnp.inf), stable=True)[: best.shape[0]]
+    enters = (candidate[best] > jnp.where(counts[weakest] > 0, scores[weakest], -jnp.inf)) & jnp.isfinite(candidate[best])
+    target = jnp.where(enters, weakest, n)  # n: out of range, dropped by the scatter
+    put = lambda array, value: array.at[target].set(value, mode="drop")  # noqa: E731
+    return Buffer(put(buffer.z, z[best]), put(scores, score[best]), put(counts, 1), put(last, clock), clock)
+
+
+def locate(buffer: Buffer, z: jax.Array, slot: jax.Array) -> jax.Array:
+    """i32[B]: ``slot``, with each -1 whose latent ``z`` f32[B, D] now sits in the buffer replaced by its slot.
+
+    A world still in play when its latent entered the buffer is then scored as a replay of that
+    entry, not entered a second time.
+    """
+    same = jnp.all(buffer.z[None, :, :] == z[:, None, :], axis=-1) & filled(buffer)[None, :]  # [B, N]
+    return jnp.where((slot < 0) & same.any(axis=1), jnp.argmax(same, axis=1), slot).astype(jnp.int32)

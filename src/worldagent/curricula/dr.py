@@ -43,6 +43,9 @@ class DomainRandomisation:
     def update(self, state: tuple, z, slot, score, valid) -> tuple:
         return state
 
+    def slot_of(self, state: tuple, z, slot):
+        return slot
+
 
 def build(worlds: Any, settings: dict, target=None):
     """``dr`` over ``worlds``; it takes no settings and no target."""

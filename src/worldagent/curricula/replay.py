@@ -139,6 +139,10 @@ class ReplayCurriculum:
         """The state after ended episodes (f32[M, D] latents, i32[M] slots, f32[M] scores, bool[M] valid)."""
         return State(buffer_lib.record(state.buffer, z, slot, score, valid, self.settings.window))
 
+    def slot_of(self, state: State, z: jax.Array, slot: jax.Array) -> jax.Array:
+        """i32[B]: the buffer slot of each world in play (``buffer.locate``)."""
+        return buffer_lib.locate(state.buffer, z, slot)
+
     def episode_score(self, potential: jax.Array, metrics: dict) -> jax.Array:
         """An ended episode's score: its target margin, or its mean learning potential."""
         return potential if self.target is None else self.target(metrics)

@@ -4,7 +4,10 @@
 the numbers ``results.env_results`` recomputes from its run store, the generator's
 ``quality.json``, the agents' learning curves and ``influence.json`` (where each lives:
 ``runs.RunLayout``, read through ``runs.Run``), and writes ``run_dir/report.html``: inline CSS, every figure a
-base64 PNG. Each headline number is printed next to the paper's value (``spec.paper``) and
+base64 PNG. It reads like a result: the headline numbers beside the paper's first, then the
+figures behind them, the provenance (versions, phases, the preset) last and folded; it ends its
+headline section with the ``worldagent explore`` command that opens the same run interactively.
+Each headline number is printed next to the paper's value (``spec.paper``) and
 carries ``data-key`` / ``data-value`` attributes so tests and scripts can read it back exactly.
 Figures that are pure functions of the store (Figures 6a and 7) are redrawn here; those that
 replay agents (Figures 1/6b and 8) were drawn by their phase and are embedded. A phase that has
@@ -24,16 +27,17 @@ from worldagent.reports.results import Headline, env_results, headlines
 from worldagent.runs import Run
 
 REPORT_FILE = "report.html"
+# The result first (ours beside the paper's), then the figures behind it, provenance last and folded.
 SECTIONS = (
-    ("overview", "Overview"),
-    ("generator", "Generator quality"),
-    ("training", "Training curves"),
+    ("headline", "Headline numbers, ours beside the paper's"),
     ("random", "Random evaluation (Figure 6a)"),
     ("strategic", "Strategic evaluation (Figures 1, 6b)"),
     ("comparison", "Optimiser comparison (Figure 7)"),
     ("influence", "Influencing (Figure 8)"),
     ("atlas", "Failure atlas (beyond the paper)"),
-    ("headline", "Headline numbers"),
+    ("generator", "Generator quality"),
+    ("training", "Training curves"),
+    ("provenance", "Provenance"),
 )
 
 
@@ -41,7 +45,7 @@ SECTIONS = (
 
 
 def overview(manifest: dict, run_dir: Path) -> str:
-    """Preset, seeds, versions, device, and each phase's status and wall time."""
+    """Preset, seeds, versions, device, and each phase's status, wall time and config (folded: provenance, not the result)."""
     rows = [
         ["preset", manifest.get("preset", "?")],
         ["seed", manifest.get("seed", "?")],
@@ -58,21 +62,36 @@ def overview(manifest: dict, run_dir: Path) -> str:
             fmt(entry.get("wall_s")),
             _time(entry.get("started")),
             _time(entry.get("finished")),
-            json.dumps(entry.get("config", {}), sort_keys=True),
+            settings_text(entry.get("config", {})),
             entry.get("error") or entry.get("outputs", {}).get("summary", ""),
         ]
         for key, entry in entries.items()
     ]
     total = sum(entry.get("wall_s") or 0.0 for entry in entries.values())
     return (
-        table(["", ""], rows)
+        f"<details><summary>Preset {esc(manifest.get('preset', '?'))}, seed {esc(manifest.get('seed', '?'))}, "
+        f"{len(entries)} phases in {total:,.1f} s on {esc(manifest.get('device', '?'))}: versions, phases and their settings</summary>"
+        + table(["", ""], rows)
         + "<h3>Phases</h3>"
         + table(["phase", "status", "wall s", "started", "finished", "config", "result"], phases)
         + f"<p>Total wall time of the phases: {total:,.1f} s.</p>"
         + "<h3>Preset</h3><pre>"
         + esc(json.dumps(preset_of_run(manifest.get("config", {}), manifest.get("envs", [])), indent=1))
-        + "</pre>"
+        + "</pre></details>"
     )
+
+
+def settings_text(config: dict, prefix: str = "") -> str:
+    """A phase's settings as ``episodes 300, seeds 0 1`` (nested keys dotted), never a raw dict."""
+    parts = []
+    for key, value in sorted(config.items()):
+        if isinstance(value, dict):
+            parts.append(settings_text(value, f"{prefix}{key}."))
+        elif isinstance(value, (list, tuple)):
+            parts.append(f"{prefix}{key} " + (" ".join(fmt(v) for v in value) or "none"))
+        else:
+            parts.append(f"{prefix}{key} {fmt(value)}")
+    return ", ".join(part for part in parts if part)
 
 
 def preset_of_run(config: dict, envs: list[str]) -> dict:
@@ -118,12 +137,40 @@ def generator_section(run_dir: Path, results: dict) -> str:
             ["training epochs", fmt(quality["training"]["epochs"])],
             ["final held-out loss", fmt(quality["training"]["final"]["holdout_loss"])],
         ]
-        rows += [[name.replace("_", " "), fmt(value)] for name, value in quality.get(env, {}).items()]
-        return table(["measure", "value"], rows) + image(
-            res["layout"].figure("generator_traversals"), f"{env}: latent traversals of G(z) (one row per latent dimension)"
+        figures = quality.get(env, {})
+        rows += [[name.replace("_", " "), fmt(value)] for name, value in figures.items() if not isinstance(value, dict)]
+        return (
+            table(["measure", "value"], rows)
+            + structure_table(figures.get("structure", {}))
+            + image(res["layout"].figure("generator_traversals"), f"{env}: latent traversals of G(z) (one row per latent dimension)")
         )
 
     return per_env(results, "generator", render, "quality", "no quality.json")
+
+
+def structure_table(structure: dict) -> str:
+    """The generator's worlds against the dataset's, one row per structural feature (``quality.json``'s "structure")."""
+    if not structure:
+        return ""
+    rows = [
+        [
+            name.replace("_", " "),
+            fmt(v.get("generator")),
+            fmt(v.get("dataset")),
+            fmt(None if v.get("relative_difference") is None else 100 * v["relative_difference"], 3),
+        ]
+        for name, v in structure.items()
+    ]
+    return "<h4>Structure: worlds G(z) against the dataset's (means)</h4>" + table(["feature", "G(z)", "dataset", "difference, %"], rows)
+
+
+def explorer_hint(run_dir: Path) -> str:
+    """How to look at the same run interactively."""
+    return (
+        "<p class='explore'>To look at these worlds yourself (every stored world on a map of the latent space, "
+        "worlds decoded and played live, the atlas and the failures), open the run in the explorer: "
+        f"<code>worldagent explore {esc(run_dir)}</code> (docs/explorer.md).</p>"
+    )
 
 
 def training_section(run_dir: Path, results: dict) -> str:
@@ -245,7 +292,7 @@ def influence_section(run_dir: Path, results: dict) -> str:
         )
         return (
             failed + f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
-            f"became the influenced training distribution; agents trained with seeds {esc(result['config']['seeds'])}, "
+            f"became the influenced training distribution; agents trained with seeds {esc(', '.join(map(str, result['config']['seeds'])))}, "
             f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
             + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)
             + image(
@@ -330,21 +377,25 @@ def pair_list(run_dir: Path, outputs: dict) -> str:
     return "<h4>Why: the nearest passing world</h4>" + image(run_dir / outputs["counterfactuals"], caption)
 
 
-def headline_section(rows: list[Headline]) -> str:
+HEADLINE_DIGITS = 3  # significant digits: the paper prints two
+
+
+def headline_section(rows: list[Headline], run_dir: Path) -> str:
+    notes = any(row.note for row in rows)
     body = [
         [
             f"<td>{esc(row.label)}</td>",
-            number(row.key, row.ours),
+            number(row.key, row.ours, HEADLINE_DIGITS),
             f"<td class='num'>{'–' if row.paper is None else fmt(row.paper)}</td>",
-            f"<td>{esc(row.note)}</td>",
+            *([f"<td>{esc(row.note)}</td>"] if notes else []),
         ]
         for row in rows
     ]
     return (
-        table(["quantity", "ours", "paper", "note"], body, raw_cells=True)
+        table(["quantity", "ours", "paper", *(["note"] if notes else [])], body, raw_cells=True)
         + "<p>Ours are recomputed from the run stores when the report is built (n/a: the phase has not run; –: the paper gives no number). "
         "Normalised: by the main metric's rule-given range where the environment has one (racing), otherwise by the run's "
-        "best single episode (harvest; see the module docstring of <code>worldagent.reports.results</code>).</p>"
+        "best single episode (harvest; see the module docstring of <code>worldagent.reports.results</code>).</p>" + explorer_hint(run_dir)
     )
 
 
@@ -364,7 +415,7 @@ def build_report(run_dir: Path | str) -> Path:
     run_dir, manifest, envs = run.run_dir, run.manifest, run.require_envs()
     results = {env: env_results(run, env) for env in envs}
     bodies = {
-        "overview": overview(manifest, run_dir),
+        "provenance": overview(manifest, run_dir),
         "generator": generator_section(run_dir, results),
         "training": training_section(run_dir, results),
         "random": random_section(run_dir, results),
@@ -372,7 +423,7 @@ def build_report(run_dir: Path | str) -> Path:
         "comparison": comparison_section(run_dir, results),
         "influence": influence_section(run_dir, results),
         "atlas": atlas_section(run_dir, results),
-        "headline": headline_section(headlines(results)),
+        "headline": headline_section(headlines(results), run_dir),
     }
     nav = "<nav>" + "".join(f'<a href="#{anchor}">{esc(title)}</a>' for anchor, title in SECTIONS) + "</nav>"
     title = f"worldagent reproduce: {manifest.get('preset', '?')} ({', '.join(envs)})"

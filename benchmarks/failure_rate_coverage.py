@@ -327,8 +327,13 @@ def run_one(proposal: str, evaluate, population, dim: int, cap: int, seed: int, 
         pool = pooled.DEFAULT_POOL
         estimate, low, high, worlds = legacy_mixture(evaluate, population, dim, min(cap, 50_000), seed, width, pool)
         return {"estimate": estimate, "low": low, "high": high, "worlds": worlds, "pool": pool, "fallback": None}
+    from worldagent.analysis import learned
+
     flags = {"UNSEEN": "unseen" in proposal, "MIN_GAIN": 0.0 if "forced" in proposal else pooled.MIN_GAIN}
     kept = {name: getattr(pooled, name) for name in flags}
+    kept_cells = learned.cells
+    if population.fresh == "bootstrap":  # distinct worlds: a pool drawn with replacement from the record repeats them,
+        learned.cells = lambda described, size: np.arange(size)  # which the command's pool would not; no cell is shared
     try:
         for name, value in flags.items():
             setattr(pooled, name, value)
@@ -338,6 +343,7 @@ def run_one(proposal: str, evaluate, population, dim: int, cap: int, seed: int, 
             prior=population.prior,
         )  # fmt: skip
     finally:
+        learned.cells = kept_cells
         for name, value in kept.items():
             setattr(pooled, name, value)
     pool = e.plan["pool"] if e.plan and not e.fallback else 0

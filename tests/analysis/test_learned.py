@@ -56,7 +56,8 @@ def test_the_rounds_put_more_draws_on_failing_worlds_than_the_descriptors_alone(
 
 
 def test_the_learned_estimate_is_unbiased_and_its_intervals_hold(monkeypatch):
-    monkeypatch.setattr(pooled, "MIN_GAIN", 0.0)  # the learned path on every seed, whatever the plan predicts
+    monkeypatch.setattr(pooled, "MIN_GAIN", 0.0)  # the learned path on every seed, whatever the pilot or plan predicts
+    monkeypatch.setattr(learned, "LEARN_GATE", 0.0)
     config = fr.ImportanceConfig(proposal="learned", pool=20_000, pilot=300)
     found = [fr.importance_sampling(play, 3, 3000, config=config, seed=seed, describe=describe) for seed in range(12)]
     assert all(e.method == "is" and e.search_worlds == 300 * (1 + learned.STAGES) for e in found)

@@ -394,7 +394,8 @@ def surrogate_sampling(
         timing.get("described", sample),
         confidence,
     )
-    learning = config.proposal == "learned" and learned.worth_learning(strata.probability, target_width, worlds, config.pilot, confidence)
+    rounds = learning_worlds(config) - config.pilot
+    learning = config.proposal == "learned" and learned.worth_learning(max(strata.probability, seen.mean()), target_width, rounds, confidence)
     if plan.fallback and not learning:
         return _fall_back(spend, plan, config, dim, worlds, batch, confidence, target_width, seen, prior, seed, say)
     if size > sample:
@@ -406,8 +407,7 @@ def surrogate_sampling(
         described = None if describe is None else describe(pool)
     features = surrogate.features(pool, described, reference=sample)
     if learning:
-        rounds = f"{learned.STAGES} rounds of {round(config.pilot * learned.STAGE_SHARE):,} worlds"
-        say(f"learning the proposal from the pilot's margins: {rounds}, each toward the last one's near-misses.")
+        say(f"learning the proposal from the pilot's margins: {learned.STAGES} rounds, {rounds:,} worlds, each toward the last one's near-misses.")
         learn_rng = np.random.default_rng([seed, IS_STREAM, LEARN_DRAWS])
         labels = learned.cells(described, size)
         model, probability = learned.learn(spend, learn_rng, pool, features, labels, margins, seen, batch)

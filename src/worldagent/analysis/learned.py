@@ -149,11 +149,13 @@ def level(margins: np.ndarray) -> float:
     return min(0.0, float(np.quantile(finite, 1 - ELITE))) if finite.size else 0.0
 
 
-def worth_learning(probability: float, target_width: float | None, worlds: int, pilot: int, confidence: float = 0.95) -> bool:
-    """Whether the rounds are a small part of the budget: at most 1/``LEARN_GATE`` of the worlds Monte Carlo needs at
-    ``target_width`` (at the pilot model's P; any P when it puts none), or of ``worlds`` without one."""
-    need = pooled.monte_carlo_worlds(probability, target_width, confidence) if target_width and probability > 0 else worlds
-    return need >= LEARN_GATE * STAGES * round(pilot * STAGE_SHARE)
+def worth_learning(probability: float, target_width: float | None, rounds: int, confidence: float = 0.95) -> bool:
+    """Whether the rounds (``rounds`` worlds) are a small part of the budget: at most 1/``LEARN_GATE`` of the worlds
+    Monte Carlo needs at ``target_width`` (±50% without one) and ``probability`` (the larger of the pilot's hit fraction
+    and its model's P, which its Gaussian tail prices low; any P when both are 0). Racing's PPO at 1e-2 without a
+    width: the rounds were spent, and the plan fell back, in 30 of 30 runs."""
+    need = pooled.monte_carlo_worlds(probability, target_width or 0.5, confidence)
+    return need >= LEARN_GATE * rounds
 
 
 def learn(

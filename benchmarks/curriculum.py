@@ -1,0 +1,202 @@
+"""Online curricula against plain random worlds, judged on the worst worlds (issue 25).
+
+    python benchmarks/curriculum.py --env racing                       # ACKTR on rays, 5 seeds x 10,000 episodes
+    python benchmarks/curriculum.py --env harvest --target conflict --minimize
+    python benchmarks/curriculum.py --env racing --episodes 1000 --seeds 0 1 --eval-worlds 100 --work runs/curriculum-small
+
+Every arm trains the same algorithm, config and episode budget on G(z) of the same generator;
+only the curriculum differs (``dr``: z ~ N(0, I); ``plr``, ``accel``; ``target``: toward
+``--target``, by default the env's failure event). The seeds of an arm train as one program
+(``agents.many.train_many``). Every final agent then plays the same ``--eval-worlds`` fresh
+worlds z ~ N(0, I) (their own seed) ``--repeats`` times, and we report per agent:
+
+- ``mean``: the mean over worlds of the main metric (normalised to [0, 1] where the env has bounds);
+- ``cvar10``: the α-CVaR at 10%, the mean over the worst 10% of those worlds (Rutherford et al. 2024);
+- ``p_failure``: the share of worlds where the env's failure event holds (world means), with its
+  exact (Clopper-Pearson) interval: Monte Carlo over the evaluation worlds;
+- ``worst``: the worst world's main metric among them (a random search of ``--eval-worlds``;
+  a fixed-budget atlas per agent was not run);
+- the training wall time of each arm (its seeds together).
+
+Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
+``dr``'s. Every step is cached under ``--work``: a killed run resumes. Writes
+``benchmarks/results/curriculum-<env>.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import RESULTS, describe_machine  # noqa: E402
+from worldagent import experiments  # noqa: E402
+from worldagent.agents.algorithms import training_config  # noqa: E402
+from worldagent.agents.distributions import world_distribution  # noqa: E402
+from worldagent.agents.many import ManyRun, train_many  # noqa: E402
+from worldagent.analysis.intervals import clopper_pearson  # noqa: E402
+from worldagent.curricula import label, make_curriculum  # noqa: E402
+from worldagent.curricula.scores import target_score  # noqa: E402
+from worldagent.envs import registry  # noqa: E402
+from worldagent.evaluation.local import evaluate  # noqa: E402
+from worldagent.events import parse_selection  # noqa: E402
+from worldagent.files import write_text  # noqa: E402
+from worldagent.influence.statistics import mean_and_ci  # noqa: E402
+from worldagent.search.objectives import generate  # noqa: E402
+
+EVAL_SEED = 20_251_126  # the evaluation worlds' own stream, apart from every training seed
+ALPHA = 0.10
+STATS = ("mean", "cvar10", "p_failure", "worst")
+NOT_RUN = {
+    "offline influence arm": "the paper's offline influence at the same total episode budget (search + retrain) is not an arm yet",
+    "rounds arm": "`influence --rounds 3` is not an arm yet",
+    "atlas worst world": "the worst world is the worst of the evaluation worlds (a random search), not a fixed-budget atlas per agent",
+}
+
+
+def paper_defaults(spec) -> dict:
+    """The paper preset's algorithm, options and episode budget for ``spec`` (what ``--preset paper`` trains)."""
+    budgets = spec.presets.get("paper", {})
+    return {
+        "algo": budgets.get("algo") or spec.default_algorithm,
+        "options": dict(budgets.get("options") or spec.reproduce_options or {}),
+        "episodes": int(budgets.get("episodes", 1000)),
+    }
+
+
+def train_arm(spec, algo, config, options, curriculum, seeds, work: Path, progress: bool) -> dict:
+    """Train one arm's seeds as one program (resumable); its agents' directories and wall seconds."""
+    runs = [ManyRun(work / f"s{seed}", seed=seed, distribution=curriculum, distribution_spec=label(curriculum)) for seed in seeds]
+    start = time.perf_counter()
+    results = train_many(spec, algo, config, runs, options=options, progress=progress)
+    wall = time.perf_counter() - start
+    return {"dirs": [str(r.out_dir) for r in results], "wall_seconds": round(wall, 1), "episodes": [r.episodes for r in results]}
+
+
+def evaluation_worlds(generator, count: int):
+    z = jax.random.normal(jax.random.key(EVAL_SEED), (count, generator.latent_dim))
+    return np.asarray(z), generate(generator, z)
+
+
+def evaluate_agent(spec, agent_dir: str, generator_dir: Path, worlds, repeats: int, cache: Path) -> dict[str, np.ndarray]:
+    """{metric: f64[B, R]} of the agent on the evaluation worlds (cached)."""
+    if cache.is_file():
+        return dict(np.load(cache))
+    setup = experiments.setup(spec.name, agent_dir, str(generator_dir), repeats=repeats)
+    metrics = evaluate(setup.env, setup.policy, worlds, repeats, jax.random.key(EVAL_SEED + 1), setup.params)
+    metrics = {name: np.asarray(value, np.float64) for name, value in spec.metrics.with_derived(metrics, setup.params).items()}
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    with open(cache, "wb") as handle:
+        np.savez(handle, **metrics)
+    return metrics
+
+
+def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
+    """mean, cvar10, p_failure (+ interval), worst of one agent (see module docstring)."""
+    main = metrics[spec.metrics.main].mean(axis=1)
+    score = spec.metrics.normalise(main, params) if spec.metrics.bounds is not None else main
+    worst_first = np.sort(score)
+    tail = max(1, int(np.ceil(ALPHA * len(score))))
+    failing = np.ones(len(score), bool)
+    for clause in parse_selection(spec.failure, spec.name).clauses:
+        failing &= clause.holds(metrics[clause.metric].mean(axis=1))
+    k, n = int(failing.sum()), len(failing)
+    low, high = clopper_pearson(k, n)
+    return {
+        "mean": float(score.mean()),
+        "cvar10": float(worst_first[:tail].mean()),
+        "p_failure": k / n,
+        "p_failure_interval": [low, high],
+        "worst": float(worst_first[0]),
+        "failing_worlds": k,
+    }
+
+
+def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
+    """{stat: {arm: mean_and_ci over seeds, + overlaps_dr}}."""
+    out: dict = {}
+    for stat in STATS:
+        out[stat] = {arm: mean_and_ci([values[stat] for values in seeds.values()]) for arm, seeds in per_seed.items()}
+        base = out[stat].get("dr")
+        for arm, summary in out[stat].items():
+            if base is not None and arm != "dr" and np.isfinite(summary["ci95"]) and np.isfinite(base["ci95"]):
+                apart = abs(summary["mean"] - base["mean"]) > summary["ci95"] + base["ci95"]
+                summary["overlaps_dr"] = not apart
+    return out
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--env", default="racing")
+    parser.add_argument("--algo", default=None, help="default: the paper preset's")
+    parser.add_argument("--option", action="append", default=None, help="env option NAME=VALUE (default: the paper preset's)")
+    parser.add_argument("--episodes", type=int, default=None, help="training episodes per run (default: the paper preset's)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument("--arms", nargs="+", default=["dr", "plr", "accel", "target"])
+    parser.add_argument("--target", default=None, help="the target arm's target (default: the env's failure event)")
+    parser.add_argument("--maximize", dest="maximize", action="store_true", default=None)
+    parser.add_argument("--minimize", dest="maximize", action="store_false")
+    parser.add_argument("--generator", type=Path, default=None, help="default: runs/quick/ENV/generator")
+    parser.add_argument("--eval-worlds", type=int, default=1000)
+    parser.add_argument("--repeats", type=int, default=8)
+    parser.add_argument("--work", type=Path, default=None)
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+
+    spec = registry.get(args.env)
+    defaults = paper_defaults(spec)
+    algo = args.algo or defaults["algo"]
+    options = spec.parse_options(args.option) if args.option else spec.check_options(defaults["options"])
+    episodes = args.episodes or defaults["episodes"]
+    generator_dir = args.generator or Path("runs/quick") / spec.name / "generator"
+    work = args.work or Path("runs") / f"curriculum-{spec.name}"
+    target_text = args.target or spec.failure
+    config = training_config(spec, algo, episodes=episodes, options=options)
+    latents = world_distribution(spec, "vae", generator_dir=generator_dir)
+    generator = latents.generator
+    _, params = spec.make_env(options)
+    z, worlds = evaluation_worlds(generator, args.eval_worlds)
+
+    arms, per_seed = {}, {}
+    for arm in args.arms:
+        target = target_score(spec, target_text, args.maximize) if arm == "target" else None
+        curriculum = make_curriculum(arm, latents, {}, target)
+        trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
+        arms[arm] = {"curriculum": label(curriculum), **trained}
+        per_seed[arm] = {}
+        for seed, agent_dir in zip(args.seeds, trained["dirs"]):
+            metrics = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz")
+            per_seed[arm][seed] = agent_statistics(spec, metrics, params)
+            print(arm, seed, {k: round(v, 4) if isinstance(v, float) else v for k, v in per_seed[arm][seed].items()}, flush=True)
+
+    result = {
+        "env": spec.name,
+        "algorithm": algo,
+        "options": options,
+        "config": config.to_dict(),
+        "episodes": episodes,
+        "seeds": args.seeds,
+        "generator": str(generator_dir),
+        "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
+        "target": {"text": target_text, "maximize": args.maximize},
+        "arms": arms,
+        "per_seed": per_seed,
+        "summary": compare(per_seed),
+        "not_run": NOT_RUN,
+        "machine": describe_machine(),
+        "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),
+    }
+    out = RESULTS / f"curriculum-{spec.name}.json"
+    write_text(out, json.dumps(result, indent=1, default=float))
+    print(f"wrote {out}")
+    return result
+
+
+if __name__ == "__main__":
+    main()

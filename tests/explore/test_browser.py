@@ -171,14 +171,14 @@ def test_a_failure_opens_and_exports(page, tmp_path):
 
     page.click("button[data-view='failures']")
     page.wait_for_selector("#failures-table img", timeout=WAIT_MS)
-    page.wait_for_function("[...document.querySelectorAll('#failures-table img')].slice(0, 6).every(i => i.naturalWidth > 0)", timeout=WAIT_MS)
+    page.wait_for_function("[...document.querySelectorAll('#failures-table img')].slice(0, 12).every(i => i.naturalWidth > 0)", timeout=WAIT_MS)
     shot(page, "failures")
     first = page.locator("#failures-table img").first
     index = int(first.get_attribute("data-world"))
     first.click()
     page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
     assert page.text_content("#world-title").startswith(f"world {index} ")
-    with page.expect_download() as download:
+    with page.expect_download(timeout=WAIT_MS) as download:
         page.click("#export-npz")
     path = tmp_path / "world.npz"
     download.value.save_as(path)

@@ -55,3 +55,9 @@ def test_atlas_cells_fold_extra_descriptors_into_the_worst_world():
     assert found == [{"x": 0, "y": 1, "score": -1.0, "entry": 1}, {"x": 1, "y": 0, "score": 7.0, "entry": 2}]
     best = views.atlas_cells(cells, grid, scores, maximize=True)
     assert best[0] == {"x": 0, "y": 1, "score": 4.0, "entry": 0}
+
+
+def test_a_latent_evaluated_again_is_one_world():
+    latents = np.array([[1.0, 2.0], [0.0, 0.0], [1.0, 2.0], [1.0, 2.0]])
+    first, counts = views.distinct_latents(latents, np.array([2, 1, 0, 3]))
+    assert first.tolist() == [2, 1] and counts.tolist() == [3, 1]

@@ -137,7 +137,7 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
 
     @app.get("/api/{env}/world/{index}.png")
     def world_picture(env: Env, index: int, size: Size = 384) -> Response:
-        return png(env.picture(env.stored_world(index), size))
+        return png(env.stored_picture(index, size))
 
     @app.get("/api/{env}/world/{index}")
     def world_info(env: Env, index: int) -> dict:

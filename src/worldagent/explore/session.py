@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ from worldagent.explore import views
 from worldagent.runs import Run
 
 RUN_AGENT = "run"  # the label of the run's own trained agent
+PICTURE_CACHE = 2048  # stored worlds' PNGs kept (a 160 px picture is a few kB)
 SAME_LATENT = 1e-9  # latents closer than this are one world (scored again by another campaign), never its own neighbour
 
 
@@ -161,7 +163,8 @@ class EnvSession:
             raise WorldagentError(f"the stored worlds have no per-episode {missing[0]!r}; use one of: {', '.join(self.means)}.")
         failing = selection.mask(self.evaluations) if self.evaluations else np.zeros(0, bool)
         severity = views.severity(selection, self.means)
-        ranked = views.rank_failures(self.latents, failing, severity, by)[:limit]
+        ranked, repeats = views.distinct_latents(self.latents, views.rank_failures(self.latents, failing, severity, by))
+        ranked, repeats = ranked[:limit], repeats[:limit]
         passing = np.flatnonzero(~failing)
         near, distance = views.nearest(self.latents[ranked], self.latents[passing], beyond=SAME_LATENT)
         prior = views.log_prior(self.latents[ranked])
@@ -172,12 +175,21 @@ class EnvSession:
                 "log_prior": float(prior[k]),
                 "severity": float(severity[i]),
                 "metrics": {name: finite_or_none(self.means[name][i]) for name in selection.metrics},
+                "evaluations": int(repeats[k]),
                 "nearest_passing": int(passing[near[k]]) if near[k] >= 0 else None,
                 "distance": finite_or_none(distance[k]),
             }
             for k, i in enumerate(ranked)
         ]
-        return {"event": selection.describe(), "failing": int(failing.sum()), "worlds": len(self.evaluations), "by": by, "rows": rows}
+        distinct = len(views.distinct_latents(self.latents, np.flatnonzero(failing))[0])
+        return {
+            "event": selection.describe(),
+            "failing": int(failing.sum()),
+            "distinct": distinct,
+            "worlds": len(self.evaluations),
+            "by": by,
+            "rows": rows,
+        }
 
     def atlas_names(self) -> list[str]:
         if "atlas_names" not in self._loaded:
@@ -252,6 +264,18 @@ class EnvSession:
 
     def picture(self, world: Any, size: int) -> bytes:
         return png_bytes(self.spec.pictures.world(world, size).convert("RGB"))
+
+    def stored_picture(self, index: int, size: int) -> bytes:
+        """PNG of stored world ``index``, kept for the next ask (maps and tables show the same worlds again and again)."""
+        key = (index, size)
+        cache = self._loaded.setdefault("pictures", OrderedDict())
+        if key not in cache:
+            picture = self.picture(self.stored_world(index), size)
+            cache[key] = picture
+            while len(cache) > PICTURE_CACHE:
+                cache.popitem(last=False)
+        cache.move_to_end(key)
+        return cache[key]
 
     def setup(self, agent: str):
         """``experiments.Setup`` of one agent label (loaded once)."""

@@ -104,6 +104,20 @@ def rank_failures(latents: np.ndarray, failing: np.ndarray, severities: np.ndarr
     return index[np.argsort(-key, kind="stable")]
 
 
+def distinct_latents(latents: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the first of ``order`` for each distinct latent, how many of ``order`` share it), in ``order``'s order.
+
+    A latent evaluated again (importance sampling draws from a pool; campaigns meet) is one world.
+    """
+    first: dict[bytes, int] = {}
+    counts: dict[bytes, int] = {}
+    for i in order:
+        key = np.round(np.asarray(latents[i], np.float64), 9).tobytes()
+        first.setdefault(key, int(i))
+        counts[key] = counts.get(key, 0) + 1
+    return np.array(list(first.values()), int), np.array([counts[key] for key in first], int)
+
+
 def atlas_cells(cells: Sequence[int], grid_cells: Sequence[int], scores: np.ndarray, maximize: bool) -> list[dict]:
     """The atlas as a 2-D heat map: each filled cell's (column, row) on the first two descriptors.
 

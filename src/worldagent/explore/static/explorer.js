@@ -317,16 +317,16 @@ function atlasCellAt(event) {
 
 async function loadFailures() {
   const event = $("event").value.trim(), by = $("rank-by").value;
-  const query = new URLSearchParams({ by, limit: "50", ...(event ? { event } : {}) });
+  const query = new URLSearchParams({ by, limit: "20", ...(event ? { event } : {}) });
   const table = $("failures-table");
   try {
     const found = await api(`/api/${state.env}/failures?${query}`);
-    $("failures-summary").textContent = `${found.failing} of ${found.worlds} stored worlds fail (${found.event}); ranked by ${found.by}`;
+    $("failures-summary").textContent = `${found.failing} of ${found.worlds} stored evaluations fail (${found.event}): ${found.distinct} distinct worlds, ranked by ${found.by}`;
     const metricNames = found.rows.length ? Object.keys(found.rows[0].metrics) : [];
-    table.innerHTML = `<tr><th>#</th><th>failing world</th><th>log p(z)</th><th>severity</th>${metricNames.map((m) => `<th>${m}</th>`).join("")}<th>nearest passing world</th><th>latent distance</th></tr>` +
+    table.innerHTML = `<tr><th>#</th><th>failing world</th><th>log p(z)</th><th>severity</th><th>times evaluated</th>${metricNames.map((m) => `<th>${m}</th>`).join("")}<th>nearest passing world</th><th>latent distance</th></tr>` +
       found.rows.map((row, k) => `<tr><td class="num">${k + 1}</td>` +
         `<td><img loading="lazy" data-world="${row.index}" src="/api/${state.env}/world/${row.index}.png?size=72" alt="world ${row.index}"> ${row.index}</td>` +
-        `<td class="num">${fmt(row.log_prior)}</td><td class="num">${fmt(row.severity)}</td>` +
+        `<td class="num">${fmt(row.log_prior)}</td><td class="num">${fmt(row.severity)}</td><td class="num">${row.evaluations}</td>` +
         metricNames.map((m) => `<td class="num">${fmt(row.metrics[m])}</td>`).join("") +
         (row.nearest_passing === null ? "<td>none</td><td></td>" :
           `<td><img loading="lazy" data-world="${row.nearest_passing}" src="/api/${state.env}/world/${row.nearest_passing}.png?size=72" alt="world ${row.nearest_passing}"> ${row.nearest_passing}</td><td class="num">${fmt(row.distance)}</td>`) +

@@ -18,7 +18,7 @@ from worldagent.curricula import buffer as buffer_lib
 from worldagent.curricula import check_request, make_curriculum, parse_curriculum_settings
 from worldagent.curricula.replay import Settings
 from worldagent.curricula.scores import target_score
-from worldagent.curricula.snapshots import find_buffer, load_snapshots
+from worldagent.curricula.snapshots import load_snapshots
 from worldagent.errors import WorldagentError
 
 TINY_PPO = PPOConfig(total_episodes=48, num_envs=8, num_steps=16, num_minibatches=2, update_epochs=1, hidden=(16,))
@@ -166,14 +166,63 @@ def test_a_killed_curriculum_run_resumes_with_the_identical_buffer(toy, tmp_path
     assert (tmp_path / "whole" / "curriculum.png").is_file()
 
 
-def test_dr_trains_exactly_as_the_plain_distribution(toy):
+def test_dr_rolls_out_exactly_as_the_plain_distribution(toy):
     spec, worlds = toy
     env, params = spec.make_env()
-    from worldagent.agents.ppo import make_train
+    from worldagent.agents.networks import ActorCritic
+    from worldagent.agents.rollouts import collect, init_runner
 
-    config = dataclasses.replace(TINY_PPO, total_episodes=16)
-    plain = make_train(config, env, params, worlds, spec.training_params).train(jax.random.key(0))[0]
-    wrapped = make_train(config, env, params, make_curriculum("dr", worlds), spec.training_params).train(jax.random.key(0))[0]
-    assert find_buffer(wrapped) is None
-    for a, b in zip(jax.tree_util.tree_leaves(plain.params), jax.tree_util.tree_leaves(wrapped.params)):
+    network = ActorCritic(env.num_actions, (8,))
+    net = network.init(jax.random.key(0), jnp.zeros(env.observation_shape))
+
+    def segment(distribution):
+        runner = init_runner(jax.random.key(1), env, params, distribution, 4)
+        return collect(jax.random.key(2), runner, network.apply, net, env, params, distribution, 8)[1]
+
+    plain, wrapped = segment(worlds), segment(make_curriculum("dr", worlds))
+    for a, b in zip(jax.tree_util.tree_leaves(plain), jax.tree_util.tree_leaves(wrapped)):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["acktr", "dqn"])
+def test_every_algorithm_trains_on_a_curriculum_and_resumes_it_identically(algo, tmp_path):
+    """ACKTR (n-step targets) on the toy env; DQN (|TD error| and a target) on a tiny harvest."""
+    from worldagent.agents.acktr import ACKTRConfig
+    from worldagent.agents.dqn import DQNConfig
+    from worldagent.envs import registry
+    from worldagent.envs.harvest.env import Harvest, make_params
+
+    small = dataclasses.replace(
+        registry.get("harvest"),
+        name="curriculum_harvest",
+        make=lambda options: (Harvest(view_size=9, view_behind=2), make_params(max_steps=20)),
+        options=(),
+    )
+    with registered() as toy:
+        registry.register(small)
+        try:
+            spec = toy if algo == "acktr" else small
+            pool = world_distribution(spec, "generator", size=8, seed=0)
+            worlds = LatentWorlds(FakeGenerator(pool.worlds))
+            if algo == "acktr":
+                config, chunk = ACKTRConfig(total_episodes=48, num_envs=8, num_steps=8, hidden=(16,), inverse_every=2), 4
+                curriculum = make_curriculum("plr", worlds, {"buffer_size": 16, "min_fill": 0.25})
+            else:
+                config = DQNConfig(num_episodes=24, num_envs=4, hidden_sizes=(16,), batch_size=16, buffer_size=400, learning_starts=40)
+                chunk = 1
+                curriculum = make_curriculum(
+                    "target", worlds, {"buffer_size": 8, "min_fill": 0.25}, target_score("harvest", "group_reward", maximize=True)
+                )
+            run = lambda where, **kw: training.train(
+                spec, algo, config, curriculum, tmp_path / where, seed=1, progress=False, chunk_updates=chunk, **kw
+            )  # noqa: E731
+            run("whole")
+            run("killed", stop_after_chunks=2)
+            run("killed")
+            finals = [load_snapshots(tmp_path / where)[-1] for where in ("whole", "killed")]
+            assert len(finals[0]["score"]) >= 2 and np.isfinite(finals[0]["score"]).all()
+            for name in ("z", "score", "count", "age"):
+                np.testing.assert_array_equal(finals[0][name], finals[1][name])
+        finally:
+            registry.unregister("curriculum_harvest")

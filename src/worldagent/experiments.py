@@ -542,6 +542,8 @@ def influence(
     seed: int = 0,
     greedy: bool = False,
     progress: bool = True,
+    runs_per_program: int | None = None,
+    rounds: int = 1,
 ) -> dict:
     """Train agents on worlds with a property and compare them with default training (paper §6.2, Figure 8).
 
@@ -574,6 +576,8 @@ def influence(
         seed=seed,
         greedy=greedy,
         progress=progress,
+        runs_per_program=runs_per_program,
+        rounds=rounds,
     )
 
 

@@ -40,6 +40,8 @@ def test_other_bad_options_exit_2(tmp_path):
         (["influence", "racing", "--select", "reward > 0", "--algo", "dqn", *common], "unknown algorithm 'dqn' for racing"),
         (["influence", "racing", "--select", "reward > 0", "--option", "tagger=0", *common], "racing has no option 'tagger'"),
         (["influence", "harvest", "--select", "crash_rate > 0.5", *common], "unknown harvest metric 'crash_rate'"),
+        (["influence", "racing", "--select", "reward > 0", "--rounds", "0", *common], "--rounds is 0; pass 1"),
+        (["influence", "racing", "--select", "reward > 0", "--runs-per-program", "0", *common], "--runs-per-program is 0; pass at least 1"),
     ):
         result = runner.invoke(app, args)
         assert result.exit_code == 2 and message in result.output, result.output

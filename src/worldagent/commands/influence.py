@@ -39,15 +39,15 @@ def format_interval(entry: dict) -> str:
     return f"{entry['mean']:.4g} ± {spread}"
 
 
-def result_table(result: dict):
-    """A rich table: one row per metric, default and influenced mean ± 95% CI over seeds."""
+def result_table(result: dict, title: str = ""):
+    """A rich table: one row per metric, default and influenced mean ± 95% CI over seeds (``title``: a prefix)."""
     from rich.table import Table
 
     from worldagent.reports.influence import metric_label
 
     seeds = len(result["config"]["seeds"])
     spread = "mean ± 95% CI" if seeds > 1 else "one seed: no CI"
-    table = Table(title=f"{result['env']}: default vs influenced ({seeds} seed{'s' if seeds != 1 else ''}, {spread})")
+    table = Table(title=f"{title}{result['env']}: default vs influenced ({seeds} seed{'s' if seeds != 1 else ''}, {spread})")
     table.add_column("metric")
     table.add_column("default", justify="right")
     table.add_column("influenced", justify="right")
@@ -92,6 +92,8 @@ def influence_command(
     stochastic: bool = False,
     search: str = "cmaes",
     settings: list[str] | tuple[str, ...] = (),
+    rounds: int = 1,
+    runs_per_program: int | None = None,
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.agents.algorithms import parse_settings, training_config
@@ -103,6 +105,10 @@ def influence_command(
     check_training_episodes(episodes)
     check_seed(seed)
     check_search(search)
+    if rounds < 1:
+        raise WorldagentError(f"--rounds is {rounds}; pass 1 (the paper's single retrain) or more.")
+    if runs_per_program is not None and runs_per_program < 1:
+        raise WorldagentError(f"--runs-per-program is {runs_per_program}; pass at least 1 (or leave it out: chosen from the device).")
     check_run_dir(out)
     options = given_options(env, option)
     chosen = parse_settings(settings, [algo])[algo]
@@ -131,6 +137,8 @@ def influence_command(
         seed=seed,
         greedy=greedy,
         progress=not quiet,
+        runs_per_program=runs_per_program,
+        rounds=rounds,
     )
     figure = influence_figure(result, experiments.example_worlds(out, setup.spec), setup.spec, out / "influence.png")
     Console().print(result_table(result))
@@ -140,6 +148,10 @@ def influence_command(
         f"{2 * seeds} agents compared on {eval_worlds} worlds x {repeats} episodes (this run: {result['wall_seconds']['total']:.0f} s) "
         f"-> {figure}, {out / RESULT_FILE}"
     )
+    for later in result.get("rounds", []):
+        Console().print(result_table({**result, **later}, f"round {later['round']}: "))
+        new = ", ".join(f"s{s}: {n} new, {later['worlds']['training_worlds'][s]} in all" for s, n in later["worlds"]["selected"].items())
+        console.print(f"round {later['round']}: worlds with {selection.describe()} ({new}) -> {out / later['dir'] / RESULT_FILE}")
 
 
 def register(app: typer.Typer) -> None:
@@ -169,6 +181,12 @@ def register(app: typer.Typer) -> None:
         greedy: bool = typer.Option(False, "--greedy", help="Actor-critics act by argmax instead of sampling."),
         stochastic: bool = stochastic_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
+        rounds: int = typer.Option(
+            1, "--rounds", help="Rounds of search, select, retrain: round r searches with round r-1's influenced agents (run_dir/round-r/)."
+        ),
+        runs_per_program: int = typer.Option(
+            None, "--runs-per-program", help="Agents trained as one vmapped program at most (memory; default: 2 on a CPU, from memory on a GPU)."
+        ),
     ) -> None:
         """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
         influence_command(
@@ -191,4 +209,6 @@ def register(app: typer.Typer) -> None:
             stochastic,
             search,
             settings,
+            rounds,
+            runs_per_program,
         )

@@ -79,15 +79,16 @@ def save_influenced_worlds(path: Path, spec, worlds: Any, latents: np.ndarray, v
     return write_atomically(path, save)
 
 
-def load_influenced_worlds(run_dir: str | Path, env) -> tuple[Any, np.ndarray, dict[str, np.ndarray]]:
+def load_influenced_worlds(run_dir: str | Path, env, name: str = WORLDS_FILE) -> tuple[Any, np.ndarray, dict[str, np.ndarray]]:
     """(worlds [k], latents f64[k, dim], {metric: f64[k]}) of a run's influenced distribution.
 
     Args:
-        run_dir: the influence run directory.
+        run_dir: the influence run directory (or a later round's, ``round-<r>/``).
         env: the env's name or ``EnvSpec`` (the worlds' fields are checked against its world type).
+        name: the file (a later round's: ``rounds.worlds_file(seed)``).
     """
     spec = registry.get(env)
-    path = Path(run_dir) / WORLDS_FILE
+    path = Path(run_dir) / name
     if not path.is_file():
         raise WorldagentError(f"{path} does not exist; run `worldagent influence` into {run_dir} first.")
     with np.load(path, allow_pickle=False) as data:

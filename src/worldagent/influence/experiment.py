@@ -65,35 +65,50 @@ def evaluate_campaign(
     return run_campaign(store, campaign, evaluate, resume=True, progress=progress, optimiser=optimiser)
 
 
-def train_agent(
-    out: Path, spec, algo: str, config: Any, distribution: Any, seed: int, options: Any, params: Any, described: str, progress: bool
-) -> dict:
-    """Train one agent into ``out`` (resuming its checkpoint), or return the record of a finished one.
-
-    A finished agent is marked by ``trained.json`` (written after the trainer returns), so a
-    rerun neither compiles nor rewrites it. The agent is saved in ``out/"policy"``.
-    """
-    from worldagent.agents.training import train
-
+def trained_record(out: Path) -> dict | None:
+    """The record of a finished agent (its ``trained.json``), None while it is unfinished."""
     marker = out / TRAINED_FILE
-    if marker.is_file():
-        return json.loads(marker.read_text())
-    result = train(
-        spec,
-        algo,
-        config,
-        distribution,
-        out,
-        seed=int(seed),
-        options=options,
-        params=params,
-        progress=progress,
-        resume=True,
-        distribution_spec=described,
-    )
+    return json.loads(marker.read_text()) if marker.is_file() else None
+
+
+def mark_trained(out: Path, result: Any, seed: int, described: str) -> dict:
+    """Write ``out/trained.json`` after its trainer returned (a rerun then neither compiles nor rewrites the agent)."""
     record = {"policy": "policy", "episodes": result.episodes, "env_steps": result.env_steps, "wall_seconds": round(result.wall_seconds, 3)}
-    write_text(marker, json.dumps({**record, "seed": int(seed), "distribution": described}, indent=1))
-    return json.loads(marker.read_text())
+    write_text(out / TRAINED_FILE, json.dumps({**record, "seed": int(seed), "distribution": described}, indent=1))
+    return trained_record(out)
+
+
+def default_runs_per_program() -> int | None:
+    """Agents trained as one program by default: 2 on a CPU, where one run already keeps the cores
+    busy and a larger program is no faster (``benchmarks/results/many-runs.json``); elsewhere None,
+    ``many.train_many``'s default from the device's memory."""
+    return 2 if jax.default_backend() == "cpu" else None
+
+
+def check_runs_per_program(value: Any) -> int | None:
+    """``runs_per_program``: None (from the device) or a positive integer."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
+        raise WorldagentError(f"runs_per_program={value!r}; pass a positive number of agents per program (--runs-per-program).")
+    return value
+
+
+def train_agents(jobs: dict[str, tuple], spec, algo: str, config: Any, options: Any, params: Any, runs_per_program: int | None, progress: bool):
+    """Train the unfinished of ``jobs`` ({name: (out dir, seed, distribution, described)}) as few programs as
+    their shapes allow (``many.train_many``: seeds together, and arms whose pools pad to one shape),
+    each resuming its own checkpoint; returns ({name: record}, {name: seconds of its program})."""
+    from worldagent.agents.many import ManyRun, train_many
+
+    records = {name: trained_record(job[0]) for name, job in jobs.items()}
+    pending = [name for name, record in records.items() if record is None]
+    timings = {name: 0.0 for name in jobs}
+    if pending:
+        runs = [ManyRun(jobs[n][0], seed=int(jobs[n][1]), distribution=jobs[n][2], distribution_spec=jobs[n][3], params=params) for n in pending]
+        cap = runs_per_program if runs_per_program is not None else default_runs_per_program()
+        results = train_many(spec, algo, config, runs, options=options, progress=progress, resume=True, max_together=cap)
+        for name, result in zip(pending, results):
+            records[name] = mark_trained(jobs[name][0], result, jobs[name][1], jobs[name][3])
+            timings[name] = result.wall_seconds
+    return records, timings
 
 
 def trained_policies(agent_dirs: dict[str, Path], spec, greedy: bool) -> dict[str, Any]:
@@ -149,6 +164,14 @@ def find_worlds(store, spec, env, params, policy, G, selection: Selection, count
     Returns:
         (evaluations tried, campaign names, worlds [k], latents f64[k, dim], {metric: f64[k]}, timings).
     """
+    tried, campaigns, timings = search_worlds(store, spec, env, params, policy, G, selection, counts, progress)
+    worlds, latents, values = select_worlds(store, campaigns, selection, spec)
+    return tried, campaigns, worlds, latents, values, timings
+
+
+def search_worlds(store, spec, env, params, policy, G, selection: Selection, counts: dict, progress: bool, names=(CANDIDATES, SEARCH)):
+    """Evaluate ``policy`` on the candidates and run the optional search, as the campaigns ``names``
+    (candidates, search); returns (evaluations tried, campaign names, timings)."""
     from worldagent.search.campaign import CampaignSpec
     from worldagent.search.objectives import Objective
     from worldagent.search.optimisers import OptimiserConfig
@@ -156,11 +179,11 @@ def find_worlds(store, spec, env, params, policy, G, selection: Selection, count
     metric, seed, repeats, timings = selection.metrics[0], counts["seed"], counts["repeats"], {}
     clock = time.perf_counter()
     random_spec = CampaignSpec(
-        CANDIDATES, spec.name, metric, True, "random", counts["candidates"], seed, G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH)
+        names[0], spec.name, metric, True, "random", counts["candidates"], seed, G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH)
     )
     tried = evaluate_campaign(store, random_spec, Objective(spec.name, metric, True), env, policy, G, params, repeats, True, progress)
     timings["candidates"] = time.perf_counter() - clock
-    campaigns = [CANDIDATES]
+    campaigns = [names[0]]
     if counts["search_budget"] > 0:
         clock = time.perf_counter()
         maximize = search_direction(selection, selection.world_means(tried)[metric])
@@ -170,17 +193,21 @@ def find_worlds(store, spec, env, params, policy, G, selection: Selection, count
 
             optimiser, extra = atlas_optimiser(spec, G, maximize, seed, counts["search_budget"])
             name = optimiser.name
-        search_spec = CampaignSpec(SEARCH, spec.name, metric, maximize, name, counts["search_budget"], seed, G.latent_dim, extra=extra)
+        search_spec = CampaignSpec(names[1], spec.name, metric, maximize, name, counts["search_budget"], seed, G.latent_dim, extra=extra)
         objective = Objective(spec.name, metric, maximize)
         tried = tried + evaluate_campaign(store, search_spec, objective, env, policy, G, params, repeats, True, progress, optimiser)
-        campaigns.append(SEARCH)
+        campaigns.append(names[1])
         timings["search"] = time.perf_counter() - clock
-    worlds, latents, values = select_worlds(store, campaigns, selection, spec)
-    return tried, campaigns, worlds, latents, values, timings
+    return tried, campaigns, timings
 
 
-def compare_agents(store, spec, env, params, G, policies: dict, counts: dict, progress: bool) -> dict[str, dict[str, dict[str, float]]]:
-    """Step (d): every agent on the same random worlds with the same episode keys; {label: {seed: {metric: mean}}}."""
+def compare_agents(
+    store, spec, env, params, G, policies: dict, counts: dict, progress: bool, prefix: str = ""
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Step (d): every agent on the same random worlds with the same episode keys; {label: {seed: {metric: mean}}}.
+
+    ``policies``: {"influenced-s0": policy, ...}; ``prefix`` sets a round's evaluation campaigns apart.
+    """
     from worldagent.search.campaign import CampaignSpec
     from worldagent.search.objectives import Objective
     from worldagent.search.optimisers import OptimiserConfig
@@ -189,7 +216,7 @@ def compare_agents(store, spec, env, params, G, policies: dict, counts: dict, pr
     base = CampaignSpec("", spec.name, main, True, "random", worlds, counts["seed"] + 1, G.latent_dim, OptimiserConfig(random_batch=RANDOM_BATCH))
     per_seed: dict[str, dict[str, dict[str, float]]] = {label: {} for label in LABELS}
     for name, policy in policies.items():
-        campaign = dataclasses.replace(base, name=f"influence-eval-{name}-w{worlds}-r{repeats}")
+        campaign = dataclasses.replace(base, name=f"influence-eval-{prefix}{name}-w{worlds}-r{repeats}")
         evaluations = evaluate_campaign(store, campaign, Objective(spec.name, main, True), env, policy, G, params, repeats, False, progress)
         label, s = name.rsplit("-s", 1)
         per_seed[label][s] = {m: float(np.nanmean(episode_values(evaluations, m))) for m in compared_metrics(spec)}
@@ -226,6 +253,8 @@ def influence(
     seed: int = 0,
     greedy: bool = False,
     progress: bool = True,
+    runs_per_program: int | None = None,
+    rounds: int = 1,
 ) -> dict:
     """Influence agents: train on worlds with a property, compare with default training (paper §6.2).
 
@@ -256,9 +285,16 @@ def influence(
         seed: seed of the candidates and the search; the evaluation worlds use ``seed + 1``.
         greedy: trained actor-critics act by argmax when evaluated.
         progress: progress bars.
+        runs_per_program: agents trained as one program at most (``many.train_many``; memory);
+            None: ``default_runs_per_program()``, from the device.
+        rounds: the phases iterated (``influence.rounds``): after round 1 (the above), each
+            round r >= 2 searches again with each seed's influenced agent of round r - 1, adds
+            the worlds it selects to that seed's influenced worlds and retrains on them, kept in
+            ``run_dir/round-<r>/``.
 
     Returns:
-        The content of ``run_dir/influence.json`` (with NaN where the file has null).
+        The content of ``run_dir/influence.json`` (with NaN where the file has null); with
+        ``rounds`` > 1 its "rounds" lists each later round's summary (``round-<r>/influence.json``).
     """
     from worldagent.agents.algorithms import training_config
     from worldagent.store import RunStore
@@ -268,6 +304,8 @@ def influence(
     algo = _check_algorithm(spec, algo)
     seeds = [int(s) for s in seeds]
     _check_counts(seeds, episodes, candidates, search_budget, eval_worlds, repeats)
+    check_runs_per_program(runs_per_program)
+    check_rounds(rounds)
     if search not in SEARCHES:
         raise WorldagentError(f"unknown search {search!r}; use one of: {', '.join(SEARCHES)}.")
     if G.env != spec.name:
@@ -303,40 +341,64 @@ def influence(
             run_dir, "training", {"selection": selection.describe(), "algo": algo, "training": training, "greedy": bool(greedy), "options": options}
         )
         save_influenced_worlds(run_dir / WORLDS_FILE, spec, worlds, latents, values)
-        agents, timings["train"] = train_all(run_dir, spec, algo, config, G, worlds, selection, seeds, options, params, progress)
+        agents, timings["train"] = train_all(run_dir, spec, algo, config, G, worlds, selection, seeds, options, params, progress, runs_per_program)
         clock = time.perf_counter()
         agent_dirs = {name: run_dir / "agents" / name / record["policy"] for name, record in agents.items()}
         per_seed = compare_agents(store, spec, env, params, G, trained_policies(agent_dirs, spec, greedy), counts, progress)
         timings["evaluate"] = time.perf_counter() - clock
     timings["total"] = time.perf_counter() - started
+    settings = {**counts, "episodes": episodes, "seeds": seeds, "options": options, "greedy": bool(greedy), "training": config_dict(config)}
+    worlds_found = {"tried": len(tried), "selected": int(len(latents)), "campaigns": campaigns, "selected_values": value_ranges(values)}
+    result = round_result(spec, algo, selection, settings, worlds_found, per_seed, agents, "agents", timings)
+    write_text(run_dir / RESULT_FILE, json.dumps(json_safe(result), indent=1))
+    if rounds > 1:
+        from worldagent.influence.rounds import later_rounds
+
+        job = dict(spec=spec, env=env, params=params, G=G, selection=selection, algo=algo, config=config, options=options, counts=counts)
+        result["rounds"] = later_rounds(run_dir, job, settings, seeds, per_seed["default"], rounds, greedy, runs_per_program, progress)
+        write_text(run_dir / RESULT_FILE, json.dumps(json_safe(result), indent=1))
+    return result
+
+
+def check_rounds(rounds: Any) -> int:
+    """``rounds``: a positive integer."""
+    if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 1:
+        raise WorldagentError(f"rounds={rounds!r}; pass 1 (the paper's single retrain) or more (--rounds).")
+    return int(rounds)
+
+
+def value_ranges(values: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """{metric: {min, mean, max}} of the selected worlds' values."""
+    return {m: {"min": float(v.min()), "mean": float(v.mean()), "max": float(v.max())} for m, v in values.items()}
+
+
+def round_result(
+    spec, algo: str, selection: Selection, settings: dict, worlds: dict, per_seed: dict, agents: dict, agents_dir: str, timings: dict
+) -> dict:
+    """What ``influence.json`` holds for one round: default against influenced agents, and how they came about."""
     compared = compared_metrics(spec)
     failed = training_failures(spec, per_seed)
     for name, why in failed.items():  # a failed run skews the comparison: say so where the user looks
-        warnings.warn(f"influence: the {name} agent {why}; its seed weighs on the means and intervals.", stacklevel=2)
-    result = {
+        warnings.warn(f"influence: the {name} agent {why}; its seed weighs on the means and intervals.", stacklevel=3)
+    return {
         "env": spec.name,
         "algo": algo,
         "selection": {"text": selection.text, "describe": selection.describe(), "metrics": list(selection.metrics)},
-        "config": {**counts, "episodes": episodes, "seeds": seeds, "options": options, "greedy": bool(greedy), "training": training},
-        "worlds": {
-            "tried": len(tried),
-            "selected": int(len(latents)),
-            "campaigns": campaigns,
-            "selected_values": {m: {"min": float(v.min()), "mean": float(v.mean()), "max": float(v.max())} for m, v in values.items()},
-        },
+        "config": settings,
+        "worlds": worlds,
         "metrics": list(compared),
         "per_seed": per_seed,
         "summary": summarise(per_seed, compared),
         "failed_training": failed,
-        "agents": {name: {**record, "dir": str(Path("agents") / name)} for name, record in agents.items()},
+        "agents": {name: {**record, "dir": str(Path(agents_dir) / name)} for name, record in agents.items()},
         "wall_seconds": rounded(timings),
         "files": {"store": "store.sqlite", "worlds": WORLDS_FILE, "plan": PLAN_FILE},
     }
-    write_text(run_dir / RESULT_FILE, json.dumps(json_safe(result), indent=1))
-    return result
 
 
-def train_all(run_dir: Path, spec, algo: str, config, G, worlds, selection: Selection, seeds: list[int], options, params, progress: bool):
+def train_all(
+    run_dir: Path, spec, algo: str, config, G, worlds, selection: Selection, seeds: list[int], options, params, progress: bool, runs_per_program=None
+):
     """Step (c): one default and one influenced agent per seed, same algorithm, budget and seed; (records, timings)."""
     from worldagent.agents.distributions import LatentWorlds, WorldPool
 
@@ -345,11 +407,5 @@ def train_all(run_dir: Path, spec, algo: str, config, G, worlds, selection: Sele
         "default": (LatentWorlds(G), "G(z), z ~ N(0, I)"),
         "influenced": (WorldPool.create(worlds), f"{count} worlds with {selection.describe()}"),
     }
-    agents, timings = {}, {}
-    for s in seeds:
-        for label in LABELS:
-            name, clock = f"{label}-s{s}", time.perf_counter()
-            distribution, described = distributions[label]
-            agents[name] = train_agent(run_dir / "agents" / name, spec, algo, config, distribution, s, options, params, described, progress)
-            timings[name] = time.perf_counter() - clock
-    return agents, timings
+    jobs = {f"{label}-s{s}": (run_dir / "agents" / f"{label}-s{s}", s, *distributions[label]) for s in seeds for label in LABELS}
+    return train_agents(jobs, spec, algo, config, options, params, runs_per_program, progress)

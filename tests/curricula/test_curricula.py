@@ -226,3 +226,22 @@ def test_every_algorithm_trains_on_a_curriculum_and_resumes_it_identically(algo,
                 np.testing.assert_array_equal(finals[0][name], finals[1][name])
         finally:
             registry.unregister("curriculum_harvest")
+
+
+@pytest.mark.slow
+def test_robust_plr_learns_nothing_until_it_replays(toy):
+    """robust=true: the gradient sees only replayed worlds' steps, so with no replay the agent stays as initialised."""
+    from worldagent.agents.ppo import make_train
+
+    spec, worlds = toy
+    env, params = spec.make_env()
+    config = dataclasses.replace(TINY_PPO, total_episodes=16)
+    never = make_curriculum("plr", worlds, {"buffer_size": 8, "replay_prob": 0.0, "robust": True})
+    trainer = make_train(config, env, params, never, spec.training_params)
+    start, (end, _) = trainer.init(jax.random.key(0)), trainer.train(jax.random.key(0))
+    assert int(end.episodes) >= 16
+    for a, b in zip(jax.tree_util.tree_leaves(start.params), jax.tree_util.tree_leaves(end.params)):
+        np.testing.assert_array_equal(a, b)
+    replaying = make_curriculum("plr", worlds, {"buffer_size": 8, "replay_prob": 1.0, "min_fill": 0.1, "robust": True})
+    moved = make_train(config, env, params, replaying, spec.training_params).train(jax.random.key(0))[0]
+    assert any(not np.array_equal(a, b) for a, b in zip(jax.tree_util.tree_leaves(start.params), jax.tree_util.tree_leaves(moved.params)))

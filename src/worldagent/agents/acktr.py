@@ -29,6 +29,7 @@ from worldagent.agents.ppo import TrainState, single_agent_trainer, update_row
 from worldagent.agents.rollouts import action_log_prob, collect, entropy, episode_summary, gae, init_runner, nstep_returns, score_segment
 from worldagent.agents.trainer import Trainer, raw_key
 from worldagent.configs import JsonConfig
+from worldagent.curricula import is_robust
 from worldagent.errors import WorldagentError
 
 
@@ -175,16 +176,19 @@ def _core(config: ACKTRConfig, env, training_params):
         params_env = training_params(params_env, config, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         returns = targets(traj, last_value)
-        runner = score_segment(distribution, runner, traj, returns.reshape(traj.value.shape))
+        runner, weights = score_segment(distribution, runner, traj, returns.reshape(traj.value.shape))
+        weight = weights.reshape(batch) if is_robust(distribution) else None  # robust PLR: only replayed worlds' steps
         obs = traj.obs.reshape(batch, *traj.obs.shape[2:])
         action = traj.action.reshape(batch)
+
+        mean = jnp.mean if weight is None else (lambda x: jnp.sum(weight * x) / jnp.maximum(weight.sum(), 1.0))  # noqa: E731
 
         def loss_fn(outputs):
             logits, value = outputs
             advantage = returns - value
-            policy_loss = -jnp.mean(jax.lax.stop_gradient(advantage) * action_log_prob(logits, action))
-            value_loss = jnp.mean(advantage**2)
-            ent = jnp.mean(entropy(logits))
+            policy_loss = -mean(jax.lax.stop_gradient(advantage) * action_log_prob(logits, action))
+            value_loss = mean(advantage**2)
+            ent = mean(entropy(logits))
             return policy_loss + config.vf_coef * value_loss - config.ent_coef * ent, (policy_loss, value_loss, ent)
 
         def fisher_fn(outputs, key):

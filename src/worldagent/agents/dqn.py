@@ -39,7 +39,7 @@ from worldagent.agents import replay as replay_lib
 from worldagent.agents.networks import QNetwork
 from worldagent.agents.trainer import Trainer, budgeted_trainer, curve_row, raw_key
 from worldagent.configs import JsonConfig
-from worldagent.curricula import as_curriculum
+from worldagent.curricula import as_curriculum, is_robust
 from worldagent.errors import WorldagentError
 
 
@@ -299,6 +299,8 @@ def make_train(config: DQNConfig, env, env_params, distribution, training_params
     if not isinstance(config, DQNConfig):
         raise WorldagentError(f"config is a {type(config).__name__}; pass a DQNConfig.")
     check_env(env)
+    if is_robust(distribution):
+        raise WorldagentError("robust PLR weighs an actor-critic's steps; DQN learns from its replay buffer: drop robust=true or train ppo/acktr.")
     # the core is shared by every budget, so the budget-dependent decay is fixed here
     core_config = config.replace(num_episodes=1, epsilon_decay_episodes=config.decay_episodes)
     init, update = _core(core_config, env, int(env_params.max_steps), training_params or _unchanged_params)

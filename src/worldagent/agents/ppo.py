@@ -30,6 +30,7 @@ from worldagent.agents.networks import ActorCritic
 from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, score_segment
 from worldagent.agents.trainer import Trainer, budgeted_trainer, curve_row, raw_key
 from worldagent.configs import JsonConfig
+from worldagent.curricula import is_robust
 from worldagent.errors import WorldagentError
 
 
@@ -211,20 +212,22 @@ def _core(config: PPOConfig, env, training_params):
         return TrainState(params, tx.init(params), runner, raw_key(key_run), zero, zero, zero)
 
     def loss_fn(params, batch_data):
-        obs, action, old_log_prob, old_value, advantage, target = batch_data
+        obs, action, old_log_prob, old_value, advantage, target, *weight = batch_data  # weight: robust PLR's
+        mean = (lambda x: x.mean()) if not weight else (lambda x: jnp.sum(weight[0] * x) / jnp.maximum(weight[0].sum(), 1.0))  # noqa: E731
         logits, value = network.apply(params, obs)
         log_prob = action_log_prob(logits, action)
         ratio = jnp.exp(log_prob - old_log_prob)
-        advantage = (advantage - advantage.mean()) / (advantage.std() + 1e-8)
+        centred = advantage - mean(advantage)
+        advantage = centred / (jnp.sqrt(mean(centred**2)) + 1e-8) if weight else centred / (advantage.std() + 1e-8)
         clip = config.clip_eps
-        policy_loss = -jnp.minimum(ratio * advantage, jnp.clip(ratio, 1 - clip, 1 + clip) * advantage).mean()
+        policy_loss = -mean(jnp.minimum(ratio * advantage, jnp.clip(ratio, 1 - clip, 1 + clip) * advantage))
         value_loss = (value - target) ** 2
         if config.clip_value:
             value_loss = jnp.maximum(value_loss, (old_value + jnp.clip(value - old_value, -clip, clip) - target) ** 2)
-        value_loss = 0.5 * value_loss.mean()
-        ent = entropy(logits).mean()
+        value_loss = 0.5 * mean(value_loss)
+        ent = mean(entropy(logits))
         total = policy_loss + config.vf_coef * value_loss - config.ent_coef * ent
-        approx_kl = ((ratio - 1) - (log_prob - old_log_prob)).mean()
+        approx_kl = mean((ratio - 1) - (log_prob - old_log_prob))
         return total, (policy_loss, value_loss, ent, approx_kl)
 
     def learn(params, opt_state, data, lr, key):
@@ -251,9 +254,11 @@ def _core(config: PPOConfig, env, training_params):
         params_env = training_params(params_env, config, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
-        runner = score_segment(distribution, runner, traj, targets)
+        runner, weights = score_segment(distribution, runner, traj, targets)
         flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731
-        data = tuple(map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets)))
+        data = tuple(
+            map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets) + ((weights,) if is_robust(distribution) else ()))
+        )
         lr = config.learning_rate * (1.0 - fraction) if config.anneal_lr else jnp.float32(config.learning_rate)
         (params, opt_state), aux = learn(state.params, state.opt_state, data, lr, key_perm)
         summary = episode_summary(traj)

@@ -176,8 +176,9 @@ def collect(
     return runner, trajectory, last_value
 
 
-def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targets: jax.Array) -> EnvRunner:
-    """The runner after the curriculum has scored the episodes that ended in ``trajectory``.
+def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targets: jax.Array) -> tuple[EnvRunner, jax.Array]:
+    """The runner after the curriculum has scored the episodes that ended in ``trajectory``, and
+    f32[T, B] weights of the steps the learner may use (all 1 but for robust PLR).
 
     Each episode's learning potential is the mean positive value loss over its steps,
     max(target - V, 0) with the trainer's value ``targets`` f32[T, B] (an episode that began in
@@ -186,7 +187,7 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
     """
     curriculum = as_curriculum(distribution)
     if not curriculum.adaptive:
-        return runner
+        return runner, jnp.ones(trajectory.done.shape, jnp.float32)
     potential = positive_value_loss(targets, trajectory.value)
 
     def one_step(carry, step):
@@ -194,7 +195,7 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
         step_potential, done, metrics = step
         total, steps = total + step_potential, steps + 1.0
         score = curriculum.episode_score(total / steps, metrics)
-        ended = (z, slot, score, done & ~on_pending)  # the episode on the world the segment began with
+        ended = (z, slot, score, done & ~on_pending, curriculum.learns_from(slot))  # ended: the segment's first world
         again = done & on_pending  # the pending world's episodes are pooled into one entry below
         carry = (
             jnp.where(done[:, None], runner.pending_z, z), jnp.where(done, runner.pending_slot, slot),
@@ -205,7 +206,7 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
 
     zero = jnp.zeros(runner.slot.shape, jnp.float32)
     start = (runner.z, runner.slot, runner.potential, runner.potential_steps, zero > 0, zero, zero)
-    carry, (zs, slots, scores, valid) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
+    carry, (zs, slots, scores, valid, weights) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
     z, slot, total, steps, _, pending_sum, pending_count = carry
     # one entry per env for the episodes its pending world ended within the segment (their mean score),
     # so that a world replayed several times in a segment (short episodes) never enters the buffer twice
@@ -215,7 +216,7 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
         flat(scores, pending_sum / jnp.maximum(pending_count, 1.0)), flat(valid, pending_count > 0),
     )  # fmt: skip
     slot = curriculum.slot_of(state, z, slot)
-    return runner.replace(curriculum=state, z=z, slot=slot, potential=total, potential_steps=steps)
+    return runner.replace(curriculum=state, z=z, slot=slot, potential=total, potential_steps=steps), weights
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[jax.Array, jax.Array]:

@@ -78,6 +78,11 @@ def label(curriculum: Any) -> str:
     return f"{curriculum.name} " + " ".join(f"{k}={v}" for k, v in changed.items()) + target
 
 
+def is_robust(distribution: Any) -> bool:
+    """Whether a trainer's distribution lets the learner use only some steps (robust PLR): known when tracing."""
+    return bool(getattr(getattr(distribution, "settings", None), "robust", False))
+
+
 def as_curriculum(distribution: Any) -> Any:
     """A trainer's ``distribution`` argument as a curriculum: a fixed distribution becomes ``dr``."""
     if hasattr(distribution, "adaptive"):

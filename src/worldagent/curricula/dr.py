@@ -46,6 +46,9 @@ class DomainRandomisation:
     def slot_of(self, state: tuple, z, slot):
         return slot
 
+    def learns_from(self, slot: jax.Array) -> jax.Array:
+        return jnp.ones(slot.shape, jnp.float32)
+
 
 def build(worlds: Any, settings: dict, target=None):
     """``dr`` over ``worlds``; it takes no settings and no target."""

@@ -8,6 +8,9 @@ One engine, three settings (``plr.py``, ``accel.py``, ``target.py``): each env's
 - otherwise new, z ~ N(0, I).
 Every world is G(z). When an episode ends, its score (``scores.py``) goes to the buffer: a
 replayed latent's score is updated, a new or edited one enters if it beats the lowest there.
+
+With ``robust`` (robust PLR, Jiang et al. 2021b) the actor-critics' gradient sees only steps
+on replayed worlds; new and edited worlds are played to be scored.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ class Settings:
             a latent edit has no published default; 0.2 keeps an edit close to its parent under N(0, I)).
         window: a replayed latent's score averages its last ``window`` episodes (1: the latest
             score, as PLR; a target averages 8, the episodes the paper rolls out per world).
+        robust: learn only from steps on replayed worlds (robust PLR; PPO and ACKTR).
     """
 
     buffer_size: int = 4000
@@ -50,6 +54,7 @@ class Settings:
     edit_prob: float = 0.0
     mutation_scale: float = 0.2
     window: int = 1
+    robust: bool = False
 
     def __post_init__(self) -> None:
         for name in ("replay_prob", "staleness", "min_fill", "edit_prob"):
@@ -142,6 +147,10 @@ class ReplayCurriculum:
     def slot_of(self, state: State, z: jax.Array, slot: jax.Array) -> jax.Array:
         """i32[B]: the buffer slot of each world in play (``buffer.locate``)."""
         return buffer_lib.locate(state.buffer, z, slot)
+
+    def learns_from(self, slot: jax.Array) -> jax.Array:
+        """f32[...]: 1 where the learner's gradient may use a step on the world from ``slot``, else 0."""
+        return (slot >= 0).astype(jnp.float32) if self.settings.robust else jnp.ones(slot.shape, jnp.float32)
 
     def episode_score(self, potential: jax.Array, metrics: dict) -> jax.Array:
         """An ended episode's score: its target margin, or its mean learning potential."""

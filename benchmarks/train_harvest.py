@@ -3,6 +3,7 @@
     python benchmarks/train_harvest.py                         # the paper's 5,000 episodes, agent 0 tags (§6.2.2)
     python benchmarks/train_harvest.py --tagger none           # nobody tags
     python benchmarks/train_harvest.py --episodes 800          # a shorter run (the time is extrapolated)
+    python benchmarks/train_harvest.py --seeds 0 1 2 3 4 --together   # 5 seeds as one program (many.train_many)
 
 Trains four independent DQNs (``worldagent.agents.dqn``, harvest's default config from
 ``algorithms.training_config``) through the host driver ``training.train`` on a uniform
@@ -16,6 +17,11 @@ and agent-steps per second, the group-reward ratio trained / random, and equalit
 ``--episodes`` is below the paper's 5,000 the full-budget time is extrapolated from the measured
 rate and labelled so. Results go to ``benchmarks/results/train_harvest-<tagger>-<backend>.json``
 with the machine's description; the run directory (curve, checkpoint, policy) to ``--out``.
+
+``--seeds`` trains several agents (one after another, or with ``--together`` as one vmapped
+program, ``many.train_many``, at most ``--max-together`` per program), each in ``--out``/seed<N>;
+the training time is that of all of them, the evaluation above is the first seed's, and every
+seed's metrics are in ``per_seed``. Results then go to ``train_harvest-<tagger>-<N>seeds[-together]``.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import WorldPool  # noqa: E402
 from worldagent.agents.dqn import DQNConfig  # noqa: E402
 from worldagent.agents.loaders import load_agent  # noqa: E402
+from worldagent.agents.many import ManyRun, train_many  # noqa: E402
 from worldagent.agents.policy import network_policy  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
@@ -75,6 +82,9 @@ def main(argv=None) -> dict:
     parser.add_argument("--eval-worlds", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=8)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seeds", type=int, nargs="+", default=None, help="several training seeds (default: --seed)")
+    parser.add_argument("--together", action="store_true", help="train the seeds as one vmapped program (many.train_many)")
+    parser.add_argument("--max-together", type=int, default=None, help="with --together: seeds per program at most (default: from the device)")
     parser.add_argument("--out", type=Path, default=None, help="run directory (default: a fresh one under /tmp)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
@@ -86,11 +96,24 @@ def main(argv=None) -> dict:
     pool = WorldPool.create(generate_maps(seeds_from(0, args.pool)))
     env, params = SPEC.make_env(options)
 
+    seeds = args.seeds or [args.seed]
+    several = len(seeds) > 1 or args.together
+    if several:
+        name += f"-{len(seeds)}seeds" + ("-together" if args.together else "")
+    out_dir = lambda seed: out / f"seed{seed}" if several else out  # noqa: E731
     start = time.perf_counter()
-    result = train(SPEC, "dqn", config, pool, out, seed=args.seed, options=options, progress=not args.quiet, resume=False)
+    if args.together:
+        runs = [ManyRun(out_dir(seed), seed=seed, distribution=pool) for seed in seeds]
+        results = train_many(SPEC, "dqn", config, runs, options=options, progress=not args.quiet, resume=False, max_together=args.max_together)
+    else:
+        results = [
+            train(SPEC, "dqn", config, pool, out_dir(seed), seed=seed, options=options, progress=not args.quiet, resume=False) for seed in seeds
+        ]
     wall = time.perf_counter() - start
-    env_steps_per_s = result.env_steps / wall
-    full_budget_s = PAPER_EPISODES * int(params.max_steps) / env_steps_per_s
+    result = results[0]
+    env_steps = sum(r.env_steps for r in results)
+    env_steps_per_s = env_steps / wall
+    full_budget_s = len(seeds) * PAPER_EPISODES * int(params.max_steps) / env_steps_per_s
 
     worlds = generate_maps(seeds_from(EVAL_SEED, args.eval_worlds))
     key = jax.random.key(args.seed + 1)
@@ -104,18 +127,27 @@ def main(argv=None) -> dict:
         if eps != config.act_epsilon
     }
     random = summary(evaluate(key, load_agent(SPEC, "random", options=options), worlds, env, params, args.repeats))
+    per_seed = [
+        {"seed": seed, "episodes": r.episodes, "trained": summary(evaluate(key, r.agent.policy, worlds, env, params, args.repeats))}
+        for seed, r in zip(seeds, results)
+    ]
     figures = {
         "command": "python benchmarks/train_harvest.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "options": {k: list(v) if isinstance(v, tuple) else v for k, v in options.items()},
         "config": config.to_dict(),
+        "seeds": seeds,
+        "training": f"many.train_many, {len(seeds)} seeds as one program (max {args.max_together or 'from the device'})"
+        if args.together
+        else "training.train, one seed after another",
         "episodes_trained": result.episodes,
-        "env_steps": result.env_steps,
-        "agent_steps": 4 * result.env_steps,
+        "env_steps": env_steps,
+        "agent_steps": 4 * env_steps,
         "train_wall_s": round(wall, 1),
         "env_steps_per_s": round(env_steps_per_s),
         "agent_steps_per_s": round(4 * env_steps_per_s),
         "paper_budget_wall_min": round(full_budget_s / 60, 1),
-        "paper_budget_wall_is": "measured" if result.episodes >= PAPER_EPISODES else "extrapolated from the measured rate",
+        "paper_budget_wall_is": ("measured" if result.episodes >= PAPER_EPISODES else "extrapolated from the measured rate")
+        + f", all {len(seeds)} seeds",
         "target_min": TARGET_MINUTES,
         "eval": {
             "worlds": args.eval_worlds,
@@ -129,6 +161,7 @@ def main(argv=None) -> dict:
         "group_reward_ratio": round(trained["group_reward"] / max(random["group_reward"], 1e-9), 2),
         "paper_default_agents_tagging": {"conflict": 0.51, "equality": 0.33},
         "final_training_chunk": {k: float(v[-1]) for k, v in result.curve.items() if len(v)},
+        **({"per_seed": per_seed} if len(seeds) > 1 else {}),
         "run_dir": str(out),
     }
     path = record(f"train_harvest-{name}", figures)

@@ -132,8 +132,8 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
         return session.describe()
 
     @app.get("/api/{env}/map")
-    def world_map(env: Env) -> dict:
-        return env.map_data()
+    def world_map(env: Env) -> Response:
+        return plain_json(env.map_data())
 
     @app.get("/api/{env}/world/{index}.png")
     def world_picture(env: Env, index: int, size: Size = 384) -> Response:
@@ -148,14 +148,14 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
         return png(env.picture(env.decode(check_latent(env, parse_latent(z))), size))
 
     @app.post("/api/{env}/play")
-    def play(env: Env, request: PlayRequest) -> dict:
+    def play(env: Env, request: PlayRequest) -> Response:
         if request.world is not None:
             world, source = env.stored_world(request.world), {"world": request.world}
         else:
             latent = check_latent(env, request.z)
             world, source = env.decode(latent), {"z": latent.tolist()}
         played = env.play(world, request.agent, request.episodes, request.seed, request.size)
-        return {**played, **source, "agent": request.agent, "seed": request.seed}
+        return plain_json({**played, **source, "agent": request.agent, "seed": request.seed})
 
     @app.get("/api/{env}/failures")
     def failures(
@@ -183,6 +183,11 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
         return Response(json.dumps(body), media_type="application/json", headers=attachment(f"{env.env}-{export_name(source)}.json"))
 
     return app
+
+
+def plain_json(body: dict) -> Response:
+    """JSON of plain lists and numbers, without FastAPI's per-element encoder (paths of thousands of points)."""
+    return Response(json.dumps(body, separators=(",", ":")), media_type="application/json")
 
 
 def png(data: bytes) -> Response:

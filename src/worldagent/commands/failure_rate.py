@@ -44,13 +44,14 @@ def estimate_line(estimate) -> str:
 
 
 def cost_lines(estimate) -> list[str]:
-    """What the estimate cost in wall time and, for the surrogate, what its pilot predicted; a cap's note."""
+    """What the estimate cost in wall time and, for a pooled proposal, what its plan predicted; a cap's note."""
     lines = [f"  {estimate.seconds:.1f} s wall time"]
     plan = estimate.plan
     if plan:
         pool = f"a pool of {plan['pool']:,} worlds" + (f" ({plan['describe_total']:.0f} s to describe)" if plan["describe_total"] else "")
         lines[0] += (
-            f"; the pilot predicted {plan['gain_episodes']:.2g}x fewer episodes than Monte Carlo and {plan['gain_seconds']:.2g}x less time,"
+            f"; the plan (after the pilot, or the learned proposal's rounds) predicted {plan['gain_episodes']:.2g}x fewer episodes than"
+            f" Monte Carlo and {plan['gain_seconds']:.2g}x less time,"
             f" with {pool}"
         )
     if estimate.fallback:

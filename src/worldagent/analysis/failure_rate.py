@@ -414,7 +414,7 @@ def surrogate_sampling(
         strata = model.strata(probability)
         plan = pooled.plan(
             strata, size, spend.worlds, worlds, target_width, timing["episode_seconds"], timing["describe_seconds"],
-            timing.get("described", sample), confidence,
+            timing.get("described", sample), confidence, "the model learned over the rounds",
         )  # fmt: skip
         if plan.fallback:
             return _fall_back(spend, plan, config, dim, worlds, batch, confidence, target_width, seen, prior, seed, say)

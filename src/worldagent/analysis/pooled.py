@@ -184,7 +184,7 @@ def pool_size(configured: int | None, budget_seconds: float, describe_seconds: f
 
 def plan(
     strata: Strata, pool: int, pilot: int, worlds: int, target_width: float | None, episode_seconds: float, describe_seconds: float,
-    described: int, confidence: float = 0.95,
+    described: int, confidence: float = 0.95, source: str = "the pilot's model",
 ) -> Plan:  # fmt: skip
     """The draws, and the gain over Monte Carlo at the width they reach, with the fallback's reason when it is below
     ``MIN_GAIN`` (in episodes, or in seconds where the pool's describing is measured).
@@ -192,6 +192,7 @@ def plan(
     Args:
         strata: of the timed sample (its shares stand for the pool's).
         pool: M; pilot: worlds already played; worlds: draws at most; described: pool worlds already described.
+        source: what the strata come from, in the fallback's reason.
         episode_seconds, describe_seconds: per world.
     """
     probability = strata.probability
@@ -205,7 +206,7 @@ def plan(
     gain_seconds = mc * episode_seconds / spent if spent > 0 else gain_episodes
     fallback = None
     if MIN_GAIN > 0 and not width <= 1:
-        fallback = f"the pilot's model cannot place the event (±{width:.0%} predicted after {draws:,} draws)"
+        fallback = f"{source} cannot place the event (±{width:.0%} predicted after {draws:,} draws)"
     elif min(gain_episodes, gain_seconds) < MIN_GAIN:
         what, gain = ("in episodes", gain_episodes) if gain_episodes < MIN_GAIN else ("in seconds, describing the pool included", gain_seconds)
         fallback = f"importance sampling is predicted to gain {gain:.2g}x over Monte Carlo {what} (below {MIN_GAIN}x)"

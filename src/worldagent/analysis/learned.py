@@ -28,7 +28,14 @@ itself and ``pooled.plan`` decides, on that model, the final draws or the fallba
 (the model's chances ``priced`` by the rounds' own estimate of P: its Gaussian tail prices P low).
 Only the final draws enter the estimate (the rounds are spent, as the pilot is): given the strata,
 it is ``pooled.stratified_estimate``, unbiased for the pool's P however the strata were learned,
-with its gamma interval. A poor model costs variance, never bias.
+with its gamma interval. A poor model costs variance, never bias. The rounds are played only where
+Monte Carlo would need ``LEARN_GATE`` times their worlds (``worth_learning``).
+
+Measured (``benchmarks/failure_rate_coverage.py``, racing PPO at 1e-3, worlds played afresh, 30
+seeds, made to run): 29-30 of 30 intervals cover, mean 1.00-1.01 of the truth; 2.15x fewer
+episodes than Monte Carlo with ``--width 0.5`` (descriptors only: 1.38x) and 1.77x at
+``--worlds 10000`` (1.85x), 0.9-1.1x in seconds. Not the 10x asked: 13-16% of P lies in the 97%
+of the pool nothing marks, and a pool's own variance caps the gain (docs/failure-rate.md).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ reader imports the writer. It never writes.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -125,21 +125,54 @@ def read_json(path: Path) -> dict | None:
 
 
 @dataclass(frozen=True)
-class Run:
-    """A run directory as its readers see it (``Run.open``).
+class Parts:
+    """One environment given piece by piece instead of as a ``reproduce`` directory.
 
     Attributes:
-        run_dir: the run directory.
-        manifest: its ``manifest.json``.
+        store: a ``store.sqlite``.
+        generator: a generator directory (``worldagent generator train``); its recorded dataset.
+        agent: what ``agents.loaders.load_agent`` reads (a train run, a scripted name, ...), or None.
+    """
+
+    store: Path
+    generator: Path
+    agent: str | None = None
+
+
+@dataclass(frozen=True)
+class Run:
+    """A run as its readers see it: a ``reproduce`` directory (``Run.open``) or parts (``Run.of_parts``).
+
+    Attributes:
+        run_dir: the run directory (for parts: the store's folder).
+        manifest: its ``manifest.json`` (for parts: one naming the environment, no phases).
+        parts: {env: ``Parts``} when the run was given piece by piece.
     """
 
     run_dir: Path
     manifest: dict
+    parts: dict = field(default_factory=dict)
 
     @classmethod
     def open(cls, run_dir: Path | str) -> Run:
         """Read ``run_dir``'s manifest (refused without one)."""
         return cls(Path(run_dir), read_manifest(run_dir))
+
+    @classmethod
+    def of_parts(cls, store: Path | str, generator: Path | str, agent: str | None = None, env: str | None = None) -> Run:
+        """A run of one environment from a store, a generator and (optionally) an agent; ``env``
+        defaults to the generator's."""
+        store, generator = Path(store), Path(generator)
+        if not store.is_file():
+            raise WorldagentError(f"no run store at {store}; pass the store.sqlite a campaign wrote (--store).")
+        recorded = read_json(generator / "generator.json") if generator.is_dir() else None
+        if recorded is None:
+            raise WorldagentError(f"{generator} holds no generator; pass a directory `worldagent generator train` wrote (--generator).")
+        env = env or recorded.get("env")
+        if recorded.get("env") != env:
+            raise WorldagentError(f"the generator in {generator} makes {recorded.get('env')} worlds, not {env} worlds; pass a {env} generator.")
+        manifest = {"format_version": MANIFEST_FORMAT, "envs": [env], "phases": {}, "preset": None}
+        return cls(store.parent, manifest, {env: Parts(store, generator, agent)})
 
     @property
     def envs(self) -> list[str]:
@@ -182,14 +215,17 @@ class Run:
         """``influence.json`` of a finished influence phase."""
         return read_json(self.layout(env).influence_result) if self.done(env, "influence") else None
 
+    def store_path(self, env: str) -> Path:
+        return self.parts[env].store if env in self.parts else self.layout(env).store_path
+
     def has_store(self, env: str) -> bool:
-        return self.layout(env).store_path.exists()
+        return self.store_path(env).exists()
 
     def store(self, env: str):
         """The environment's ``RunStore`` (a context manager; refused when there is none)."""
         from worldagent.store import RunStore
 
-        return RunStore(self.layout(env).store_path, create=False)
+        return RunStore(self.store_path(env), create=False)
 
     def evaluations(self, env: str) -> list:
         """Every evaluation of the environment's store (without worlds), campaign by campaign."""
@@ -206,19 +242,20 @@ class Run:
             arrays = store.world(campaign, generation, slot)
         return registry.get(env).world_from_arrays(arrays)
 
+    def has_generator(self, env: str) -> bool:
+        return env in self.parts or self.layout(env).generator_dir.is_dir()
+
     def generator(self, env: str):
-        """G(z) of the run (``worlds.generator.Generator``), with the run's dataset."""
+        """G(z) of the run (``worlds.generator.Generator``), with the run's dataset (for parts: the generator's own)."""
         from worldagent.worlds.generator import load_generator
 
+        if env in self.parts:
+            return load_generator(self.parts[env].generator)[0]
         layout = self.layout(env)
         return load_generator(layout.generator_dir, layout.dataset_path)[0]
 
-    def agent_path(self, env: str) -> Path:
-        """The trained agent's directory (refused before the agent phase finished)."""
-        if not self.done(env, "agent"):
-            raise WorldagentError(f"{self.run_dir} has no trained {env} agent yet; run `worldagent reproduce --out {self.run_dir}` to finish it.")
-        return self.layout(env).agent_dir
-
-    def agent_options(self, env: str) -> dict:
-        """The env options the run's agent was trained with (as the agent phase recorded them)."""
-        return dict(self.outputs(env, "agent").get("options") or {})
+    def agent_source(self, env: str) -> str | None:
+        """What ``load_agent`` reads for the run's own agent; None before the agent phase finished."""
+        if env in self.parts:
+            return self.parts[env].agent
+        return str(self.layout(env).agent_dir) if self.done(env, "agent") else None

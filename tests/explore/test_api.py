@@ -222,3 +222,21 @@ def test_exploring_writes_nothing_to_the_run(toy_run, session):
         assert client.get(path).status_code == 200
     assert client.post("/api/toy/play", json={"world": 1, "agent": "scripted/random", "episodes": 1}).status_code == 200
     assert file_hashes(toy_run) == before
+
+
+def test_an_env_without_locate_shows_its_own_picture_of_the_episodes(toy_run, toy_spec):
+    import dataclasses
+
+    from worldagent.evaluation.trajectories import Episodes
+    from worldagent.explore.session import episodes_payload
+
+    plain = dataclasses.replace(toy_spec, pictures=dataclasses.replace(toy_spec.pictures, locate=None))
+    positions = np.array([[[0, 0], [0, 1], [1, 1]]])
+    played = Episodes(
+        positions, np.ones((1, 3), bool), np.array([2]), {"return": np.array([1.0]), "reached": np.array([1.0]), "steps": np.array([2.0])}
+    )
+    world = toy_spec.world_from_arrays(stored(toy_run)[0].world)
+    payload = episodes_payload(plain, world, played, toy_spec.make_env()[1], 96)
+    assert payload["episodes"][0]["path"] is None and payload["still"].startswith("data:image/png;base64,")
+    animated = episodes_payload(toy_spec, world, played, toy_spec.make_env()[1], 96)
+    assert animated["still"] is None and np.asarray(animated["episodes"][0]["path"]).shape == (3, 1, 2)

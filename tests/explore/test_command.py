@@ -28,3 +28,30 @@ def test_a_non_local_host_gets_a_token(monkeypatch, session):
     lines.clear()
     server.serve(session, echo=lines.append)
     assert lines[0].startswith("worldagent explore: http://127.0.0.1:8765/ ")  # local: no token needed
+
+
+def test_a_store_with_its_generator_is_explored_without_a_run_directory(toy_run):
+    from fastapi.testclient import TestClient
+
+    from worldagent.commands.explore import open_run
+    from worldagent.explore.session import Session
+
+    run = open_run(None, toy_run / "toy" / "store.sqlite", toy_run / "toy" / "generator", "homing", "")
+    client = TestClient(server.make_app(Session.of(run)), base_url="http://127.0.0.1")
+    (env,) = client.get("/api/run").json()["envs"]
+    assert env["name"] == "toy" and env["worlds"] == 48 and env["agents"][0] == "run"
+    assert client.get("/api/toy/world/0.png").status_code == 200
+
+
+def test_parts_are_checked(toy_run, tmp_path):
+    runner = CliRunner()
+    both = runner.invoke(app, ["explore", str(toy_run), "--store", str(toy_run / "toy" / "store.sqlite")])
+    assert both.exit_code == 2 and "not both" in both.output
+    alone = runner.invoke(app, ["explore", "--store", str(toy_run / "toy" / "store.sqlite")])
+    assert alone.exit_code == 2 and "--generator" in alone.output
+    no_generator = runner.invoke(app, ["explore", "--store", str(toy_run / "toy" / "store.sqlite"), "--generator", str(tmp_path)])
+    assert no_generator.exit_code == 2 and "holds no generator" in no_generator.output
+    other = runner.invoke(
+        app, ["explore", "--store", str(toy_run / "toy" / "store.sqlite"), "--generator", str(toy_run / "toy" / "generator"), "--env", "racing"]
+    )
+    assert other.exit_code == 2 and "not racing worlds" in other.output

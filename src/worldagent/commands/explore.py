@@ -1,4 +1,4 @@
-"""``worldagent explore RUN_DIR``: a local web app over a ``reproduce`` run (docs/explorer.md)."""
+"""``worldagent explore RUN_DIR``: a local web app over a run (docs/explorer.md)."""
 
 from __future__ import annotations
 
@@ -16,13 +16,32 @@ def check_port(port: int) -> int:
     return port
 
 
+def open_run(run_dir: Path | None, store: Path | None, generator: Path | None, agent: str, env: str):
+    """The ``runs.Run`` to explore: a reproduce directory, or a store with its generator (and agent)."""
+    from worldagent.runs import Run
+
+    if run_dir is not None:
+        if store or generator or agent:
+            raise WorldagentError("give either RUN_DIR or --store with --generator (and --agent), not both.")
+        if not run_dir.is_dir():
+            raise WorldagentError(f"{run_dir} is not a directory; pass a run directory `worldagent reproduce --out` wrote.")
+        return Run.open(run_dir)
+    if store is None or generator is None:
+        raise WorldagentError("pass a run directory (worldagent explore runs/quick), or --store and --generator (and --agent).")
+    return Run.of_parts(store, generator, agent or None, env or None)
+
+
 def register(app: typer.Typer) -> None:
     """Add ``worldagent explore``."""
 
     @app.command()
     @friendly_errors
     def explore(
-        run_dir: Path = typer.Argument(..., help="A run directory `worldagent reproduce` wrote (its manifest.json, stores, generator, agents)."),
+        run_dir: Path = typer.Argument(None, help="A run directory `worldagent reproduce` wrote (its manifest.json, stores, generator, agents)."),
+        store: Path = typer.Option(None, "--store", help="Instead of RUN_DIR: a run store (store.sqlite) of campaigns."),
+        generator: Path = typer.Option(None, "--generator", help="With --store: the generator its campaigns searched."),
+        agent: str = typer.Option("", "--agent", help="With --store: the agent to play (a train run, a scripted policy's name, ...)."),
+        env: str = typer.Option("", "--env", help="With --store: the environment (default: the generator's)."),
         host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on. Any other than 127.0.0.1 requires a token."),
         port: int = typer.Option(8765, "--port", help="Port to listen on."),
         token: str = typer.Option("", "--token", help="Token every request must carry (made and printed when --host is not local)."),
@@ -33,11 +52,9 @@ def register(app: typer.Typer) -> None:
         from worldagent.explore.session import Session
 
         check_port(port)
-        if not run_dir.is_dir():
-            raise WorldagentError(f"{run_dir} is not a directory; pass a run directory `worldagent reproduce --out` wrote.")
-        session = Session.open(run_dir)
+        session = Session.of(open_run(run_dir, store, generator, agent, env))
         if warm:
-            for env in session.envs.values():
-                console.print(f"warming {env.env}: compiling G(z) and the run's agent ...")
-                env.warm_up()
+            for found in session.envs.values():
+                console.print(f"warming {found.env}: compiling G(z) and the run's agent ...")
+                found.warm_up()
         serve(session, host=host, port=port, token=token or None, echo=console.print)

@@ -36,7 +36,8 @@ SAME_LATENT = 1e-9  # latents closer than this are one world (scored again by an
 def agent_sources(run: Run, env: str) -> dict[str, str]:
     """{label: what ``agents.loaders.load_agent`` reads} of every agent the explorer may play."""
     spec = registry.get(env)
-    found = {RUN_AGENT: str(run.layout(env).agent_dir)} if run.done(env, "agent") else {}
+    own = run.agent_source(env)
+    found = {RUN_AGENT: own} if own else {}
     agents_dir = run.layout(env).influence_dir / "agents"
     if agents_dir.is_dir():
         found |= {f"influence/{d.name}": str(d) for d in sorted(agents_dir.iterdir()) if (d / "policy").is_dir()}
@@ -101,7 +102,7 @@ class EnvSession:
             "highlighted": [m for m in spec.metrics.highlighted if m in self.means],
             "failure": spec.failure,
             "agents": list(self.agents),
-            "has_generator": self.run.layout(self.env).generator_dir.is_dir(),
+            "has_generator": self.run.has_generator(self.env),
             "animates": spec.pictures.locate is not None,
             "atlases": self.atlas_names(),
         }
@@ -333,14 +334,34 @@ def episodes_payload(spec, world: Any, played, params: Any, size: int) -> dict:
             }
         )
     means = {name: float(np.mean(np.asarray(v, np.float64))) for name, v in metrics.items()}
-    return {"size": size, "episodes": runs, "means": means}
+    still = still_picture(spec, world, played, size) if pixels is None else None
+    return {"size": size, "episodes": runs, "means": means, "still": still}
+
+
+def still_picture(spec, world: Any, played, size: int) -> str | None:
+    """The env's own picture of the episodes (``pictures.episodes``) as a data URL: what an env without ``locate`` shows instead of the animation."""
+    if spec.pictures.episodes is None:
+        return None
+    import base64
+
+    from worldagent.reports.figures import _pyplot
+
+    plt = _pyplot()
+    figure, axis = plt.subplots(figsize=(size / 100, size / 100), dpi=100)
+    spec.pictures.episodes(axis, world, played)
+    axis.set_xticks([])
+    axis.set_yticks([])
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", bbox_inches="tight")
+    plt.close(figure)
+    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode()
 
 
 def run_latent_dim(run: Run, env: str, evaluations: list) -> int:
     """The latent size: the stored latents', else the generator's."""
     if evaluations:
         return len(evaluations[0].latent)
-    if run.layout(env).generator_dir.is_dir():
+    if run.has_generator(env):
         return run.generator(env).latent_dim
     raise WorldagentError(f"{run.run_dir} has neither stored worlds nor a generator for {env}; run `worldagent reproduce --out {run.run_dir}`.")
 
@@ -365,7 +386,11 @@ class Session:
 
     @classmethod
     def open(cls, run_dir: Path | str) -> Session:
-        run = Run.open(run_dir)
+        return cls.of(Run.open(run_dir))
+
+    @classmethod
+    def of(cls, run: Run) -> Session:
+        """The session of a run (``Run.open`` or ``Run.of_parts``)."""
         return cls(run, {env: EnvSession.open(run, env) for env in run.require_envs()})
 
     def env(self, name: str) -> EnvSession:

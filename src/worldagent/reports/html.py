@@ -406,7 +406,7 @@ def build_report(run_dir: Path | str) -> Path:
     """Write ``run_dir/report.html`` from the manifest, the stores and the phases' outputs.
 
     Args:
-        run_dir: a ``worldagent reproduce`` run directory.
+        run_dir: a run directory written by ``reproduce``.
 
     Returns:
         The report's path.
@@ -426,7 +426,7 @@ def build_report(run_dir: Path | str) -> Path:
         "headline": headline_section(headlines(results), run_dir),
     }
     nav = "<nav>" + "".join(f'<a href="#{anchor}">{esc(title)}</a>' for anchor, title in SECTIONS) + "</nav>"
-    title = f"worldagent reproduce: {manifest.get('preset', '?')} ({', '.join(envs)})"
+    title = f"Reproduction, {manifest.get('preset', '?')} preset ({', '.join(envs)})"
     page = (
         f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{esc(title)}</title><style>{CSS}</style></head><body>"
         f"<h1>{esc(title)}</h1><p>Optimising Worlds to Evaluate and Influence Reinforcement Learning Agents, reproduced end to end.</p>"

@@ -71,7 +71,7 @@ def phase_state(entry: dict | None) -> str | None:
         return None
     if status == "failed":
         return f'<p class="missing">failed:</p><p class="error">{esc(entry.get("error", ""))}</p>'
-    return missing(f"not finished ({status}); rerun `worldagent reproduce` to resume it")
+    return missing(f"not finished ({status}); run reproduce again on this run directory to resume it")
 
 
 def section(anchor: str, title: str, body: str) -> str:

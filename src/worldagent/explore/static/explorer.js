@@ -218,6 +218,7 @@ async function play() {
     }) : null));
     state.players = results;
     results.forEach((r, i) => showMetrics(i, r));
+    results.forEach((r, i) => { if (r && r.still) $(i === 0 ? "world-img" : "world-img-2").src = r.still; });  // no animation: the env's own picture
     const longest = Math.max(...results.filter(Boolean).flatMap((r) => r.episodes.map((e) => e.steps)));
     $("frames").textContent = String(longest);
     animate(longest);

@@ -91,6 +91,9 @@ def test_round_2_resumes_at_its_training_chunk_and_keeps_every_round(interrupted
     assert file_times(run_dir / "agents") == at_kill["round1"]  # round 1's agents were not touched again
     with RunStore(run_dir, create=False) as store:
         counts = {c.name: len(store.evaluations(c.name)) for c in store.campaigns()}
+    with RunStore(run_dir, create=False) as store:
+        first = [e.latent.tolist() for e in store.evaluations("influence-candidates")]
+        assert all(e.latent.tolist() not in first for e in store.evaluations(round_campaigns(2, 0)[0]))  # fresh candidates
     for seed in (0, 1):
         for name in round_campaigns(2, seed)[:1]:
             assert counts[name] == at_kill["counts"][name] == 6  # round 2's search was not run again
@@ -112,7 +115,8 @@ def test_a_round_adds_the_worlds_its_agent_fails_on_to_the_previous_ones(interru
     for seed in ("0", "1"):
         worlds, latents, values = load_influenced_worlds(run_dir / "round-2", toy.name, worlds_file(int(seed)))
         grown = result["rounds"][0]["worlds"]
-        assert len(latents) == grown["training_worlds"][seed] <= len(first.walls) + grown["selected"][seed]
+        assert len(latents) == grown["training_worlds"][seed] == len(first.walls) + grown["added"][seed]
+        assert grown["added"][seed] <= grown["selected"][seed]
         np.testing.assert_array_equal(np.asarray(worlds.walls)[: len(first.walls)], np.asarray(first.walls))  # round 1's stay, first
         assert np.all(values["reached"] < 0.5)
 

@@ -150,7 +150,8 @@ def influence_command(
     )
     for later in result.get("rounds", []):
         Console().print(result_table({**result, **later}, f"round {later['round']}: "))
-        new = ", ".join(f"s{s}: {n} new, {later['worlds']['training_worlds'][s]} in all" for s, n in later["worlds"]["selected"].items())
+        found = later["worlds"]
+        new = ", ".join(f"s{s}: {n} found, {found['added'][s]} new, {found['training_worlds'][s]} in all" for s, n in found["selected"].items())
         console.print(f"round {later['round']}: worlds with {selection.describe()} ({new}) -> {out / later['dir'] / RESULT_FILE}")
 
 

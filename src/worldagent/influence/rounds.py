@@ -1,9 +1,10 @@
 """The paper's phases iterated (issue 25 item 2): ``influence(..., rounds=N)``, ``--rounds N``.
 
 Round 1 is the paper's experiment (``experiment.influence``). Each round r >= 2 does, per seed:
-evaluate that seed's influenced agent of round r - 1 on the candidates (and the search, if any:
-the same budget, pushed toward the property); add the worlds where it has the property to the
-worlds that agent trained on (repeats kept once: what earlier agents failed on stays in); train
+evaluate that seed's influenced agent of round r - 1 on fresh candidates (and the search, if any:
+the same budgets, pushed toward the property; seeded ``round_seed``, never the evaluation worlds'
+seed); add the worlds where it has the property to the worlds that agent trained on (repeats
+kept once: what earlier agents failed on stays in); train
 a fresh influenced agent on them, with the same algorithm, budget and seed. Fresh, not continued:
 every round's agent has the default agent's training budget, so each round compares at equal
 training cost, and the default agents are round 1's (their distribution never changes). Every
@@ -51,6 +52,12 @@ def round_dir(run_dir: Path, r: int) -> Path:
 def worlds_file(seed: int) -> str:
     """A later round's training worlds of one seed."""
     return f"influenced_worlds-s{seed}.npz"
+
+
+def round_seed(seed: int, r: int) -> int:
+    """Seed of round ``r``'s candidates and search: round 1's ``seed``, then seed + 2, + 4, ... (the
+    evaluation worlds use seed + 1, so no round trains on them)."""
+    return int(seed) + 2 * (int(r) - 1)
 
 
 def round_campaigns(r: int, seed: int) -> tuple[str, str]:
@@ -113,17 +120,21 @@ def one_round(
     spec, selection, counts = job["spec"], job["selection"], job["counts"]
     started, here, before = time.perf_counter(), round_dir(run_dir, r), round_dir(run_dir, r - 1)
     previous = trained_policies({f"influenced-s{s}": before / "agents" / f"influenced-s{s}" / "policy" for s in seeds}, spec, greedy)
-    timings, tried, selected, campaigns = {"search": 0.0}, 0, {}, []
+    timings, tried, selected, added, campaigns = {"search": 0.0}, 0, {}, {}, []
     for s in seeds:
         clock = time.perf_counter()
         names = round_campaigns(r, s)
+        fresh = {**counts, "seed": round_seed(counts["seed"], r)}
         evaluated, used, _ = search_worlds(
-            store, spec, job["env"], job["params"], previous[f"influenced-s{s}"], job["G"], selection, counts, progress, names
+            store, spec, job["env"], job["params"], previous[f"influenced-s{s}"], job["G"], selection, fresh, progress, names
         )
         found = select_worlds(store, used, selection, spec) if selection.mask(evaluated).any() else None  # none: the agent no longer fails there
+        before_count = len(pools[s][1])
         pools[s] = merge_worlds(spec, pools[s], found)
         save_influenced_worlds(here / worlds_file(s), spec, *pools[s])
-        tried, selected[str(s)], campaigns = tried + len(evaluated), 0 if found is None else len(found[1]), campaigns + used
+        selected[str(s)] = 0 if found is None else len(found[1])
+        added[str(s)] = len(pools[s][1]) - before_count
+        tried, campaigns = tried + len(evaluated), campaigns + used
         timings["search"] += time.perf_counter() - clock
     described = lambda s: f"{len(pools[s][1])} worlds with {selection.describe()} (round {r})"  # noqa: E731
     jobs = {f"influenced-s{s}": (here / "agents" / f"influenced-s{s}", s, WorldPool.create(pools[s][0]), described(s)) for s in seeds}
@@ -135,7 +146,8 @@ def one_round(
     timings["total"] = time.perf_counter() - started
     worlds = {
         "tried": tried,
-        "selected": selected,  # per seed: worlds new in this round
+        "selected": selected,  # per seed: distinct worlds with the property among this round's
+        "added": added,  # per seed: those of them not already in its training worlds
         "training_worlds": {str(s): len(pools[s][1]) for s in seeds},
         "campaigns": campaigns,
         "selected_values": {str(s): value_ranges(pools[s][2]) for s in seeds},

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from worldagent.errors import WorldagentError
-from worldagent.search.optimisers import OptimiserConfig, make_optimiser
+from worldagent.search.optimisers import OptimiserConfig, make_optimiser, minimise_from
 
 CENTRE = np.full(10, 1.5)
 FAST_BO = OptimiserConfig(bo_batch=4, initial_points=8, bo_candidates=2000, bo_starts=2)
@@ -29,8 +29,9 @@ def best_after(name, budget, maximize=False, seed=0, objective=sphere):
 
 @pytest.mark.parametrize("name, budget", [("cmaes", 21 * 8), ("bo", 24)])
 def test_minimises_a_sphere_and_beats_random_search(name, budget):
-    found = best_after(name, budget)
-    random = min(best_after("random", budget, seed=s) for s in range(3))  # random's best of three tries
+    # medians over 5 seeds: at 24 evaluations one seed's best swings by 2x with the GP's fit
+    found = np.median([best_after(name, budget, seed=s) for s in range(5)])
+    random = np.median([best_after("random", budget, seed=s) for s in range(5)])
     assert found < 0.6 * random
     assert found < 0.5 * np.sum(CENTRE**2)  # well below the prior's centre, z = 0
 
@@ -73,3 +74,25 @@ def test_bad_requests_are_refused():
     z = cma.ask(21)
     with pytest.raises(WorldagentError, match="exactly the generation"):
         cma.tell(z + 1.0, sphere(z))
+
+
+def test_the_acquisition_minimiser_finds_the_lowest_point_in_the_box():
+    bowl = lambda x: ((np.atleast_2d(x) - 0.5) ** 2).sum(axis=1)  # noqa: E731  (scored in batches, as the GP is)
+    starts = np.array([[-0.9, 0.9, 0.0], [0.1, -0.5, 0.8]])
+    x, value = minimise_from(bowl, starts, np.array([[-1.0, 1.0]] * 3))
+    np.testing.assert_allclose(x, 0.5, atol=1e-5)
+    assert value == pytest.approx(0.0, abs=1e-9)
+    x, _ = minimise_from(bowl, starts, np.array([[-1.0, 1.0], [-1.0, 0.2], [-1.0, 1.0]]))
+    np.testing.assert_allclose(x, [0.5, 0.2, 0.5], atol=1e-5)  # on the box's face
+
+
+def test_a_batch_fits_the_kernel_once_and_the_liar_refits_only_the_posterior():
+    opt = make_optimiser("bo", 10, False, 0, FAST_BO)
+    z = opt.ask(8)
+    opt.tell(z, sphere(z))
+    gp, fits = opt.bo._gp, []
+    fit = gp.fit
+    gp.fit = lambda X, y: fits.append((gp.optimizer, len(X))) or fit(X, y)
+    opt.ask(4)
+    assert [o for o, _ in fits] == ["fmin_l_bfgs_b", None, None, None, None]
+    assert [n for _, n in fits] == [8, 8, 9, 10, 11]  # the liar's dummies join one by one

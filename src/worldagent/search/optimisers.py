@@ -42,9 +42,14 @@ class OptimiserConfig:
         bo_batch: BO suggestions per round.
         initial_points: BO random latents before the GP is used.
         xi: BO expected-improvement exploration margin.
-        bo_starts: L-BFGS restarts when maximising EI (the library's default, 10, costs
-            seconds per suggestion; 3 keeps a suggestion well under a second).
-        bo_candidates: random candidates scored before those restarts.
+        bo_starts: L-BFGS runs when maximising EI, from the best random candidates (the
+            library's default is 10).
+        bo_candidates: random candidates scored before those runs (the library's default is
+            10,000; scoring them was half a suggestion's cost at 210 observations, and they only
+            pick the L-BFGS starts).
+        bo_gp_restarts: random restarts of the GP's hyperparameter fit, once per batch, besides
+            the warm start from the last batch's fit (the library: 5 at every suggestion; with 1, a
+            fit stuck at a poor length scale cost one seed in 10 most of its progress on a sphere).
         random_batch: random-search latents per round.
     """
 
@@ -55,7 +60,8 @@ class OptimiserConfig:
     initial_points: int = 10
     xi: float = 0.01
     bo_starts: int = 3
-    bo_candidates: int = 10_000
+    bo_candidates: int = 2_000
+    bo_gp_restarts: int = 5
     random_batch: int = 21
 
 
@@ -144,7 +150,16 @@ class CMAES(Optimiser):
 
 
 class BayesOpt(Optimiser):
-    """GP + expected improvement (``bayesian-optimization``), batches by constant liar."""
+    """GP + expected improvement (``bayesian-optimization``), batches by constant liar.
+
+    What a suggestion costs, and how it is kept small (``benchmarks/bo_suggestion.py``): the GP's
+    hyperparameters (one Matern length scale) are fitted once per batch, on the real
+    observations, from the previous batch's fit and ``bo_gp_restarts`` random starts; the
+    constant liar's refits for the batch's later suggestions only update the posterior with
+    those hyperparameters. EI is maximised from the best of ``bo_candidates`` random latents by
+    ``bo_starts`` L-BFGS runs, each gradient a forward difference computed in one batched GP
+    prediction instead of ``dim + 1`` calls. Linear algebra runs on one BLAS thread.
+    """
 
     name = "bo"
 
@@ -156,13 +171,20 @@ class BayesOpt(Optimiser):
             raise WorldagentError("Bayesian optimisation needs a box: pass a positive bound.")
         self.keys = [f"z{i:02d}" for i in range(dim)]  # zero-padded: the library sorts keys
 
+        class EI(acquisition.ExpectedImprovement):
+            def _smart_minimize(self, acq, space, x_seeds, random_state):
+                return minimise_from(acq, x_seeds, space.bounds)
+
         class Liar(acquisition.ConstantLiar):
             """The constant liar with our budget for maximising the acquisition."""
+
+            def _fit_gp(self, gp, target_space):  # hyperparameters fixed for the batch (BayesOpt.ask): the posterior only
+                gp.fit(target_space.params, target_space.target)
 
             def suggest(self, gp, target_space, n_random=None, n_smart=None, fit_gp=True, random_state=None):
                 return super().suggest(gp, target_space, config.bo_candidates, config.bo_starts, fit_gp, random_state)
 
-        liar = Liar(acquisition.ExpectedImprovement(xi=config.xi), strategy="max")  # seeded at suggest() by random_state below
+        liar = Liar(EI(xi=config.xi), strategy="max")  # seeded at suggest() by random_state below
         self.bo = BayesianOptimization(
             f=None,
             pbounds={key: (-config.bound, config.bound) for key in self.keys},
@@ -183,14 +205,55 @@ class BayesOpt(Optimiser):
         if len(self.bo.space) < self.config.initial_points:
             suggestions = self.bo.random_sample(n)  # seeded by the optimiser's random state
         else:
-            suggestions = [self.bo.suggest() for _ in range(n)]
+            from threadpoolctl import threadpool_limits
+
+            # One BLAS thread: the GP's matrices are small, and threads waiting on busy cores
+            # (an evaluation's XLA threads, another job) made each solve ~100x slower (measured).
+            with threadpool_limits(limits=1, user_api="blas"):
+                self._fit_hyperparameters()
+                suggestions = [self.bo.suggest() for _ in range(n)]
         points = [self.bo.space.params_to_array(params) for params in suggestions]
         return np.asarray(points, np.float64).reshape(n, self.dim)
+
+    def _fit_hyperparameters(self) -> None:
+        """Fit the GP's kernel to the observations, warm-started from the last fit, and fix it for the batch."""
+        import warnings
+
+        gp = self.bo._gp  # the library's GP (it has no public handle): seeded by the optimiser's random state
+        gp.optimizer, gp.n_restarts_optimizer = "fmin_l_bfgs_b", self.config.bo_gp_restarts
+        with warnings.catch_warnings():  # sklearn warns when a length scale reaches its bound
+            warnings.simplefilter("ignore")
+            gp.fit(self.bo.space.params, self.bo.space.target)
+        gp.kernel, gp.optimizer = gp.kernel_, None  # the next fit starts here; the liar's refits keep it
 
     def tell(self, z, scores) -> None:
         z, scores = self._checked(z, scores)
         for point, score in zip(z, -self._minimised(scores)):  # the library maximises
             self.bo.register(params=dict(zip(self.keys, point)), target=float(score))
+
+
+def minimise_from(acq, starts: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, float]:
+    """The lowest of ``acq`` (f[m, dim] -> f[m]) found by L-BFGS-B from each start, within ``bounds`` f[dim, 2].
+
+    The gradient is a forward difference (scipy's step), its ``dim + 1`` points scored in one call:
+    each GP prediction has a fixed cost that dominates at these sizes.
+    """
+    from scipy.optimize import minimize
+
+    dim = bounds.shape[0]
+    step = np.sqrt(np.finfo(np.float64).eps)
+
+    def value_and_gradient(x):
+        h = step * np.maximum(1.0, np.abs(x)) * np.where(x >= 0, 1.0, -1.0)
+        values = np.asarray(acq(np.vstack([x, x + np.diag(h)])), np.float64).reshape(-1)
+        return values[0], (values[1:] - values[0]) / h
+
+    best_x, best = np.full(dim, np.nan), np.inf
+    for start in starts:
+        found = minimize(value_and_gradient, start, jac=True, bounds=bounds, method="L-BFGS-B")
+        if found.success and float(found.fun) < best:
+            best_x, best = found.x, float(found.fun)
+    return np.clip(best_x, bounds[:, 0], bounds[:, 1]), best
 
 
 class RandomSearch(Optimiser):

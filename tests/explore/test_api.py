@@ -240,3 +240,20 @@ def test_an_env_without_locate_shows_its_own_picture_of_the_episodes(toy_run, to
     assert payload["episodes"][0]["path"] is None and payload["still"].startswith("data:image/png;base64,")
     animated = episodes_payload(toy_spec, world, played, toy_spec.make_env()[1], 96)
     assert animated["still"] is None and np.asarray(animated["episodes"][0]["path"]).shape == (3, 1, 2)
+
+
+def test_saving_a_world_is_the_one_write(tmp_path, toy_run, toy_spec):
+    import shutil
+
+    from worldagent.explore.session import Session
+
+    copy = tmp_path / "run"
+    shutil.copytree(toy_run, copy)
+    client = TestClient(make_app(Session.open(copy)), base_url=LOCAL)
+    before = file_hashes(copy)
+    saved = client.post("/api/toy/save", json={"world": 2}).json()["saved"]
+    assert saved == str(copy / "toy" / "explorer" / "toy-world-2.npz")
+    assert set(file_hashes(copy)) - set(before) == {copy / "toy" / "explorer" / "toy-world-2.npz"}
+    assert all(file_hashes(copy)[p] == h for p, h in before.items())
+    np.testing.assert_array_equal(WorldDataset.load(saved, env="toy").worlds.walls[0], stored(copy)[2].world["walls"])
+    assert client.post("/api/toy/save", json={"z": [0, 0]}).status_code == 400

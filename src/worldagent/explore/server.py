@@ -6,7 +6,8 @@ header). Without a token, requests naming another host than the loopback one are
 web page elsewhere cannot reach the server through DNS rebinding). Requests are checked
 (latent length, finite and bounded numbers, capped counts, agents and metrics by name from
 the run's own lists): a bad one gets a 4xx with ``{"error": "<one line>"}``. Files come only
-from the package's ``static/`` folder; nothing is unpickled; nothing is written to the run.
+from the package's ``static/`` folder; nothing is unpickled; nothing is written to the run
+except the worlds a user saves (``POST /api/ENV/save``: a one-world dataset in ``<run>/ENV/explorer/``).
 
 API (``ENV``: an environment of the run)::
 
@@ -19,6 +20,7 @@ API (``ENV``: an environment of the run)::
     GET  /api/ENV/failures                failing worlds     (?event=, by=likelihood|severity, limit=)
     GET  /api/ENV/atlas                   the atlas heat map (?name=)
     GET  /api/ENV/export.npz|.json        a world as a one-world dataset / JSON  (?world=I or ?z=...)
+    POST /api/ENV/save                    {"world": I | "z": [...]}: write it to <run>/ENV/explorer/ (the only write)
 """
 
 import hashlib
@@ -43,6 +45,7 @@ LATENT_BOUND = 10.0  # |z_i| ≤ 10: the prior puts no mass beyond; larger value
 MAX_EPISODES = 16
 MAX_SIZE = 768
 MAX_FAILURES = 500
+SAVED_FOLDER = "explorer"  # <run>/<env>/explorer/: the worlds a user saved (nothing else is ever written)
 TOKEN_HEADER = "x-worldagent-token"
 TOKEN_COOKIE = "worldagent_token"
 LOOPBACK = ("127.0.0.1", "localhost", "[::1]")
@@ -84,6 +87,19 @@ class PlayRequest(BaseModel):
     episodes: int = Field(8, ge=1, le=MAX_EPISODES)
     seed: int = Field(0, ge=0, lt=2**31)
     size: int = Field(384, ge=64, le=MAX_SIZE)
+
+    @model_validator(mode="after")
+    def one_source(self) -> Self:
+        if (self.world is None) == (self.z is None):
+            raise ValueError("give either world (a stored world's index) or z (a latent), not both or neither")
+        return self
+
+
+class SaveRequest(BaseModel):
+    """Save stored world ``world`` or G(``z``) into the run (the one request that writes)."""
+
+    world: int | None = Field(None, ge=0)
+    z: list[float] | None = Field(None, max_length=256)
 
     @model_validator(mode="after")
     def one_source(self) -> Self:
@@ -173,8 +189,20 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
     @app.get("/api/{env}/export.npz")
     def export_npz(env: Env, world: Annotated[int | None, Query(ge=0)] = None, z: Annotated[str | None, Query(max_length=4096)] = None) -> Response:
         found, source = world_of(env, world, z)
-        data = one_world_dataset(env, found)
+        data = dataset_bytes(one_world_dataset(env, found))
         return Response(data, media_type="application/octet-stream", headers=attachment(f"{env.env}-{export_name(source)}.npz"))
+
+    @app.post("/api/{env}/save")
+    def save(env: Env, request: SaveRequest) -> dict:
+        """Write the world as a one-world dataset to ``<run>/<env>/explorer/`` (a training pool, a fixture)."""
+        if request.world is not None:
+            found, source = env.stored_world(request.world), env.world_summary(request.world)
+        else:
+            latent = check_latent(env, request.z)
+            found, source = env.decode(latent), {"latent": latent.tolist()}
+        folder = env.run.layout(env.env).dir / SAVED_FOLDER
+        path = one_world_dataset(env, found).save(folder / f"{env.env}-{export_name(source)}.npz")
+        return {"saved": str(path)}
 
     @app.get("/api/{env}/export.json")
     def export_json(env: Env, world: Annotated[int | None, Query(ge=0)] = None, z: Annotated[str | None, Query(max_length=4096)] = None) -> Response:
@@ -205,14 +233,13 @@ def export_name(source: dict) -> str:
     return "z-" + hashlib.sha256(json.dumps(source["latent"]).encode()).hexdigest()[:10]
 
 
-def one_world_dataset(env: EnvSession, world: Any) -> bytes:
+def one_world_dataset(env: EnvSession, world: Any):
     """The world as a one-world ``WorldDataset`` file (``WorldDataset.load`` reads it; seed -1: not generated)."""
     from worldagent.worlds.dataset import WorldDataset
 
     spec = env.spec
     batched = spec.world_from_arrays({k: v[None] for k, v in spec.world_to_arrays(world).items()})
-    dataset = WorldDataset(env.env, np.array([-1], np.int64), batched, np.asarray(spec.cells(batched), np.uint8), tuple(spec.cell_shape))
-    return dataset_bytes(dataset)
+    return WorldDataset(env.env, np.array([-1], np.int64), batched, np.asarray(spec.cells(batched), np.uint8), tuple(spec.cell_shape))
 
 
 def dataset_bytes(dataset) -> bytes:

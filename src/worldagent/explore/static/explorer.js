@@ -287,6 +287,13 @@ function drawFrame(i, result, frame) {
   });
 }
 
+async function saveWorld() {
+  try {
+    const saved = await api(`/api/${state.env}/save`, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(source()) });
+    status(`saved ${saved.saved}`);
+  } catch (error) { status(error.message, true); }
+}
+
 // -- atlas --------------------------------------------------------------------------------
 
 async function loadAtlas() {
@@ -365,6 +372,7 @@ $("failures-table").addEventListener("click", (e) => { if (e.target.dataset.worl
 $("failures-go").addEventListener("click", loadFailures);
 $("rank-by").addEventListener("change", loadFailures);
 $("play").addEventListener("click", play);
+$("save").addEventListener("click", saveWorld);
 $("agent").addEventListener("change", updateExport);
 $("agent2").addEventListener("change", updateExport);
 $("reset-z").addEventListener("click", () => { if (state.baseZ) { setSliders(state.baseZ); state.z = state.baseZ.slice(); redrawLatent(); } });

@@ -147,9 +147,12 @@ def test_merging_keeps_each_world_once_in_order(toy):
     assert merge_worlds(toy, old, None) is old
 
 
-def test_bad_rounds_and_runs_per_program_are_refused(tmp_path, toy, toy_generator):
+def test_bad_rounds_and_runs_per_program_are_refused(tmp_path, toy):
+    from worldagent.influence.experiment import influence as run_influence
+
+    # refused before the env, agent or generator is touched (None here)
     with pytest.raises(WorldagentError, match=r"rounds=0; pass 1 .*--rounds"):
-        run(tmp_path, toy, toy_generator, rounds=0)
+        run_influence(tmp_path, toy, None, None, None, None, SELECT, episodes=8, rounds=0)
     with pytest.raises(WorldagentError, match=r"runs_per_program=0; .*--runs-per-program"):
-        run(tmp_path, toy, toy_generator, runs_per_program=0)
+        run_influence(tmp_path, toy, None, None, None, None, SELECT, episodes=8, runs_per_program=0)
     assert not (tmp_path / "store.sqlite").exists()

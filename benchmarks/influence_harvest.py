@@ -139,6 +139,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--eval-worlds", type=int, default=500)
     parser.add_argument("--diagnostic-worlds", type=int, default=300)
     parser.add_argument("--work", type=Path, default=Path("runs/influence-harvest"))
+    parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     progress, started = not args.quiet, time.perf_counter()
@@ -157,6 +158,7 @@ def main(argv=None) -> dict:
         candidates=args.candidates,
         search_budget=args.search_budget,
         eval_worlds=args.eval_worlds,
+        runs_per_program=args.runs_per_program,
         progress=progress,
     )
     quality = json.loads((gen_dir / "quality.json").read_text())

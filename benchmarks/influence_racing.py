@@ -155,6 +155,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--eval-worlds", type=int, default=1000)
     parser.add_argument("--generator", type=Path, default=Path("runs/generators/racing"))
     parser.add_argument("--work", type=Path, default=Path("runs/influence-racing"))
+    parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     progress, started = not args.quiet, time.perf_counter()
@@ -179,6 +180,7 @@ def main(argv=None) -> dict:
         search_budget=args.search_budget,
         search="atlas",
         eval_worlds=args.eval_worlds,
+        runs_per_program=args.runs_per_program,
         config=config,
         progress=progress,
     )

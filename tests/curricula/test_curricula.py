@@ -245,3 +245,25 @@ def test_robust_plr_learns_nothing_until_it_replays(toy):
     replaying = make_curriculum("plr", worlds, {"buffer_size": 8, "replay_prob": 1.0, "min_fill": 0.1, "robust": True})
     moved = make_train(config, env, params, replaying, spec.training_params).train(jax.random.key(0))[0]
     assert any(not np.array_equal(a, b) for a, b in zip(jax.tree_util.tree_leaves(start.params), jax.tree_util.tree_leaves(moved.params)))
+
+
+def test_decoded_worlds_go_to_the_envs_that_used_their_pending_world(toy):
+    from worldagent.agents.rollouts import draws_per_segment, refill
+    from worldagent.curricula.replay import Draw
+
+    spec, worlds = toy
+    pool = world_distribution(spec, "generator", size=8, seed=0)
+    assert draws_per_segment(pool, 32, 16) == 32  # a pool is cheap: every env's pending world is redrawn
+    assert draws_per_segment(worlds, 32, 16) == 8 and draws_per_segment(worlds, 16, 128) == 16  # G(z): one per 64 env-steps
+
+    class Runner(struct.PyTreeNode):
+        pending: object
+        pending_z: jax.Array
+        pending_slot: jax.Array
+        used: jax.Array
+
+    old = Runner(jnp.arange(5.0), jnp.zeros((5, 1)), jnp.full(5, 7), jnp.array([True, False, True, True, False]))
+    new = refill(old, Draw(jnp.array([[1.0], [2.0]]), jnp.array([-1, 3]), jnp.array([10.0, 20.0])))
+    np.testing.assert_array_equal(new.pending, [10.0, 1.0, 20.0, 3.0, 4.0])  # envs 0 and 2 served in order, env 3 waits
+    np.testing.assert_array_equal(new.pending_slot, [-1, 7, 3, 7, 7])
+    np.testing.assert_array_equal(new.used, [False, False, False, True, False])

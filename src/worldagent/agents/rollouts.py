@@ -8,12 +8,19 @@ Shared by PPO and ACKTR (paper §5.3). One call of ``collect`` is one ``lax.scan
     advantages, targets = gae(traj.reward, traj.value, traj.done, last_value, gamma, lam)
 
 Worlds (issue 5, "every env in a training batch can be on a different world"): every env
-holds a *pending* world, drawn from the distribution at the start of each ``collect`` (one
-``vmap``'d ``distribution.sample`` per env per segment, not per step: ``G(z)`` decodes and
-searches 10,000 rasters, far too costly to run every step for every env). An episode that
-ends restarts on its env's pending world (``core.step_autoreset(..., next_world=...)``). An
-env that ends two episodes within one segment (early crashes) replays the pending world; the
-next segment draws afresh.
+holds a *pending* world; an episode that ends restarts on it (``core.step_autoreset(...,
+next_world=...)``). At the start of each ``collect`` pending worlds are drawn from the
+curriculum, never per step. From a pool (cheap) every env gets a fresh one each segment. From
+G(z), which decodes and searches 10,000 rasters per world, only ``draws_per_segment`` are
+decoded (one per 64 env-steps), and they go to the envs whose pending world was started since
+their last draw: an env keeps an unused pending world, and an env that ends more episodes than
+it is given worlds replays its pending world.
+
+Curricula (``worldagent.curricula``): the ``distribution`` argument is a curriculum, or a fixed
+distribution taken as ``dr``. The runner carries the curriculum's state and each env's latent;
+after the trainer has its value targets, ``score_segment`` scores every episode that ended in
+the segment (mean positive value loss over its steps, or its target margin) and updates the
+curriculum, inside the jitted update.
 
 Ends of episodes: ``done = terminated | truncated``, both cut the bootstrap (PureJaxRL's
 convention; the racing observation has no clock, so a time-limit value would be guessed).
@@ -51,6 +58,8 @@ class EnvRunner:
             same of each env's pending world.
         potential, potential_steps: f32[B] the learning potential summed over each env's
             episode so far (the steps already scored), and how many steps that sum holds.
+        pending: each env's pending world (a batched world pytree, leading axis B).
+        used: bool[B] the pending world was started since it was drawn (it needs a new one).
     """
 
     obs: jax.Array
@@ -64,6 +73,8 @@ class EnvRunner:
     pending_slot: jax.Array
     potential: jax.Array
     potential_steps: jax.Array
+    pending: Any
+    used: jax.Array
 
 
 @struct.dataclass
@@ -103,7 +114,36 @@ def init_runner(key: jax.Array, env, env_params, distribution, num_envs: int) ->
     draw = curriculum.sample(state, key_worlds, num_envs)
     obs, env_state = jax.vmap(env.reset, in_axes=(0, 0, None))(jax.random.split(key_reset, num_envs), draw.worlds, env_params)
     zeros = jnp.zeros(num_envs, jnp.float32)
-    return EnvRunner(obs, env_state, zeros, jnp.zeros(num_envs, jnp.int32), state, draw.z, draw.slot, draw.z, draw.slot, zeros, zeros)
+    used = jnp.ones(num_envs, bool)
+    return EnvRunner(
+        obs, env_state, zeros, jnp.zeros(num_envs, jnp.int32), state, draw.z, draw.slot, draw.z, draw.slot, zeros, zeros, draw.worlds, used
+    )
+
+
+def draws_per_segment(distribution, num_envs: int, num_steps: int) -> int:
+    """Pending worlds drawn per segment: every env's from a pool; from G(z), one per 64 env-steps.
+
+    64 steps is shorter than the episodes training plays where G(z) is costly (racing with its
+    training respawn: 150-300 steps), so envs rarely wait for a world.
+    """
+    if not hasattr(getattr(as_curriculum(distribution), "worlds", None), "generator"):
+        return num_envs
+    return int(min(num_envs, max(1, -(-num_envs * num_steps // 64))))
+
+
+def refill(runner: EnvRunner, draw) -> EnvRunner:
+    """The runner with the drawn worlds given, in env order, to envs whose pending world was used."""
+    count = draw.slot.shape[0]
+    if count == runner.used.shape[0]:  # one per env: all replaced (what training always did)
+        return runner.replace(pending=draw.worlds, pending_z=draw.z, pending_slot=draw.slot, used=jnp.zeros_like(runner.used))
+    rank = jnp.cumsum(runner.used) - 1
+    take = runner.used & (rank < count)
+    index = jnp.clip(rank, 0, count - 1)
+    pick = lambda new, old: jnp.where(take.reshape(-1, *[1] * (old.ndim - 1)), new[index], old)  # noqa: E731
+    return runner.replace(
+        pending=jax.tree_util.tree_map(pick, draw.worlds, runner.pending), pending_z=pick(draw.z, runner.pending_z),
+        pending_slot=pick(draw.slot, runner.pending_slot), used=runner.used & ~take,
+    )  # fmt: skip
 
 
 def sample_action(key: jax.Array, logits: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -151,14 +191,15 @@ def collect(
     num_envs = runner.episode_return.shape[0]
     curriculum = as_curriculum(distribution)
     key_worlds, key_steps = jax.random.split(key)
-    draw = curriculum.sample(runner.curriculum, key_worlds, num_envs)
+    draw = curriculum.sample(runner.curriculum, key_worlds, draws_per_segment(curriculum, num_envs, num_steps))
+    runner = refill(runner, draw)
     step_env = jax.vmap(lambda k, s, a, w: step_autoreset(env, k, s, a, env_params, next_world=w, ended_metrics=True))
 
     def one_step(runner: EnvRunner, step_key):
         key_act, key_env = jax.random.split(step_key)
         logits, value = apply_fn(net_params, runner.obs)
         action, log_prob = sample_action(key_act, logits)
-        obs, state, reward, terminated, truncated, info, metrics = step_env(jax.random.split(key_env, num_envs), runner.state, action, draw.worlds)
+        obs, state, reward, terminated, truncated, info, metrics = step_env(jax.random.split(key_env, num_envs), runner.state, action, runner.pending)
         done = jnp.logical_or(terminated, truncated)
         episode_return = runner.episode_return + reward
         episode_length = runner.episode_length + 1
@@ -166,11 +207,11 @@ def collect(
         episode = {"return": episode_return, "length": episode_length, **per_env}
         record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, episode, metrics)
         runner = runner.replace(
-            obs=obs, state=state, episode_return=jnp.where(done, 0.0, episode_return), episode_length=jnp.where(done, 0, episode_length)
-        )
+            obs=obs, state=state, episode_return=jnp.where(done, 0.0, episode_return), episode_length=jnp.where(done, 0, episode_length),
+            used=runner.used | done,
+        )  # fmt: skip
         return runner, record
 
-    runner = runner.replace(pending_z=draw.z, pending_slot=draw.slot)
     runner, trajectory = jax.lax.scan(one_step, runner, jax.random.split(key_steps, num_steps))
     _, last_value = apply_fn(net_params, runner.obs)
     return runner, trajectory, last_value

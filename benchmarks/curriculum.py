@@ -2,7 +2,7 @@
 
     python benchmarks/curriculum.py --env racing                       # ACKTR on rays, 5 seeds x 10,000 episodes
     python benchmarks/curriculum.py --env harvest --target conflict --minimize
-    python benchmarks/curriculum.py --env racing --episodes 1000 --seeds 0 1 --eval-worlds 100 --work runs/curriculum-small
+    python benchmarks/curriculum.py --env racing --episodes 2000 --curriculum-set buffer_size=500 --work runs/curriculum-racing-2000
 
 Every arm trains the same algorithm, config and episode budget on G(z) of the same generator;
 only the curriculum differs (``dr``: z ~ N(0, I); ``plr``, ``accel``; ``target``: toward
@@ -41,7 +41,7 @@ from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.many import ManyRun, train_many  # noqa: E402
 from worldagent.analysis.intervals import clopper_pearson  # noqa: E402
-from worldagent.curricula import label, make_curriculum  # noqa: E402
+from worldagent.curricula import label, make_curriculum, parse_curriculum_settings  # noqa: E402
 from worldagent.curricula.scores import target_score  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
@@ -142,6 +142,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--target", default=None, help="the target arm's target (default: the env's failure event)")
     parser.add_argument("--maximize", dest="maximize", action="store_true", default=None)
     parser.add_argument("--minimize", dest="maximize", action="store_false")
+    parser.add_argument("--curriculum-set", action="append", default=[], help="NAME=VALUE for every curriculum arm (docs/curriculum.md)")
     parser.add_argument("--generator", type=Path, default=None, help="default: runs/quick/ENV/generator")
     parser.add_argument("--eval-worlds", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=8)
@@ -162,11 +163,12 @@ def main(argv=None) -> dict:
     generator = latents.generator
     _, params = spec.make_env(options)
     z, worlds = evaluation_worlds(generator, args.eval_worlds)
+    settings = parse_curriculum_settings(args.curriculum_set)
 
     arms, per_seed = {}, {}
     for arm in args.arms:
         target = target_score(spec, target_text, args.maximize) if arm == "target" else None
-        curriculum = make_curriculum(arm, latents, {}, target)
+        curriculum = make_curriculum(arm, latents, settings if arm != "dr" else {}, target)
         trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
         arms[arm] = {"curriculum": label(curriculum), **trained}
         per_seed[arm] = {}
@@ -185,6 +187,7 @@ def main(argv=None) -> dict:
         "generator": str(generator_dir),
         "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
         "target": {"text": target_text, "maximize": args.maximize},
+        "curriculum_settings": settings,
         "arms": arms,
         "per_seed": per_seed,
         "summary": compare(per_seed),
@@ -192,7 +195,8 @@ def main(argv=None) -> dict:
         "machine": describe_machine(),
         "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),
     }
-    out = RESULTS / f"curriculum-{spec.name}.json"
+    suffix = "" if episodes == defaults["episodes"] else f"-{episodes}"
+    out = RESULTS / f"curriculum-{spec.name}{suffix}.json"
     write_text(out, json.dumps(result, indent=1, default=float))
     print(f"wrote {out}")
     return result

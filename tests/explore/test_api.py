@@ -228,7 +228,7 @@ def test_an_env_without_locate_shows_its_own_picture_of_the_episodes(toy_run, to
     import dataclasses
 
     from worldagent.evaluation.trajectories import Episodes
-    from worldagent.explore.session import episodes_payload
+    from worldagent.explore.episodes import episodes_payload
 
     plain = dataclasses.replace(toy_spec, pictures=dataclasses.replace(toy_spec.pictures, locate=None))
     positions = np.array([[[0, 0], [0, 1], [1, 1]]])

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from worldagent.reports.html import overview, preset_of_run
+from worldagent.reports.provenance import overview, preset_of_run
 
 
 def test_preset_section_shows_only_the_environments_run(tmp_path):

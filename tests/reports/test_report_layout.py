@@ -6,7 +6,8 @@ from __future__ import annotations
 import json
 import re
 
-from worldagent.reports.html import SECTIONS, build_report, settings_text
+from worldagent.reports.html import SECTIONS, build_report
+from worldagent.reports.provenance import settings_text
 from worldagent.reproduce.manifest import Manifest
 
 STRUCTURE = {"total_curvature": {"generator": 12.99151906, "dataset": 13.8333957, "relative_difference": -0.0608582808}}

@@ -78,34 +78,41 @@ def check_latent(session: EnvSession, z: list[float]) -> np.ndarray:
     return np.asarray(z, np.float64)
 
 
-class PlayRequest(BaseModel):
-    """Play episodes now: on stored world ``world`` or on G(``z``)."""
+class WorldRequest(BaseModel):
+    """A world to act on: stored world ``world`` or G(``z``), exactly one."""
 
     world: int | None = Field(None, ge=0)
     z: list[float] | None = Field(None, max_length=256)
+
+    @model_validator(mode="after")
+    def one_source(self) -> Self:
+        if (self.world is None) == (self.z is None):
+            raise ValueError("give either world (a stored world's index) or z (a latent), not both or neither")
+        return self
+
+
+class PlayRequest(WorldRequest):
+    """Play episodes of ``agent`` on the world now."""
+
     agent: str = Field(RUN_AGENT, max_length=100)
     episodes: int = Field(8, ge=1, le=MAX_EPISODES)
     seed: int = Field(0, ge=0, lt=2**31)
     size: int = Field(384, ge=64, le=MAX_SIZE)
 
-    @model_validator(mode="after")
-    def one_source(self) -> Self:
-        if (self.world is None) == (self.z is None):
-            raise ValueError("give either world (a stored world's index) or z (a latent), not both or neither")
-        return self
+
+Size = Annotated[int, Query(ge=32, le=MAX_SIZE)]
+LatentText = Annotated[str | None, Query(max_length=4096)]
+WorldIndex = Annotated[int | None, Query(ge=0)]
 
 
-class SaveRequest(BaseModel):
-    """Save stored world ``world`` or G(``z``) into the run (the one request that writes)."""
-
-    world: int | None = Field(None, ge=0)
-    z: list[float] | None = Field(None, max_length=256)
-
-    @model_validator(mode="after")
-    def one_source(self) -> Self:
-        if (self.world is None) == (self.z is None):
-            raise ValueError("give either world (a stored world's index) or z (a latent), not both or neither")
-        return self
+def resolve(env: EnvSession, world: int | None, z: list[float] | None) -> tuple[Any, dict]:
+    """(the world, where it came from) of a stored world's index or a latent (exactly one)."""
+    if (world is None) == (z is None):
+        raise WorldagentError("give either world=I (a stored world) or z=a,b,... (a latent).")
+    if world is not None:
+        return env.stored_world(world), env.world_summary(world)
+    latent = check_latent(env, z)
+    return env.decode(latent), {"latent": latent.tolist()}
 
 
 def make_app(session: Session, token: str | None = None) -> FastAPI:
@@ -121,16 +128,14 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
             raise HTTPException(404, f"no environment {env!r} in this run; use one of: {', '.join(session.envs)}.") from None
 
     Env = Annotated[EnvSession, Depends(env_session)]
-    Size = Annotated[int, Query(ge=32, le=MAX_SIZE)]
+    add_page(app)
+    add_views(app, session, Env)
+    add_world_actions(app, Env)
+    return app
 
-    def world_of(env: EnvSession, world: int | None, z: str | None) -> tuple[Any, dict]:
-        """(world, where it came from) of ``?world=I`` or ``?z=...`` (exactly one)."""
-        if (world is None) == (z is None):
-            raise WorldagentError("give either world=I (a stored world) or z=a,b,... (a latent).")
-        if world is not None:
-            return env.stored_world(world), env.world_summary(world)
-        latent = check_latent(env, parse_latent(z))
-        return env.decode(latent), {"latent": latent.tolist()}
+
+def add_page(app: FastAPI) -> None:
+    """The page and its assets, looked up by exact name in the package's ``static/`` folder."""
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:
@@ -142,6 +147,10 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
         if name not in known:  # only the package's own files, by exact name: no path ever reaches the disk
             raise HTTPException(404, f"no asset {name!r}.")
         return FileResponse(known[name])
+
+
+def add_views(app: FastAPI, session: Session, Env: Any) -> None:
+    """What the map, world, atlas and failures views read."""
 
     @app.get("/api/run")
     def run_info() -> dict:
@@ -163,16 +172,6 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
     def decode_picture(env: Env, z: Annotated[str, Query(max_length=4096)], size: Size = 384) -> Response:
         return png(env.picture(env.decode(check_latent(env, parse_latent(z))), size))
 
-    @app.post("/api/{env}/play")
-    def play(env: Env, request: PlayRequest) -> Response:
-        if request.world is not None:
-            world, source = env.stored_world(request.world), {"world": request.world}
-        else:
-            latent = check_latent(env, request.z)
-            world, source = env.decode(latent), {"z": latent.tolist()}
-        played = env.play(world, request.agent, request.episodes, request.seed, request.size)
-        return plain_json({**played, **source, "agent": request.agent, "seed": request.seed})
-
     @app.get("/api/{env}/failures")
     def failures(
         env: Env,
@@ -186,31 +185,35 @@ def make_app(session: Session, token: str | None = None) -> FastAPI:
     def atlas(env: Env, name: Annotated[str | None, Query(max_length=200)] = None) -> dict:
         return env.atlas(name)
 
+
+def add_world_actions(app: FastAPI, Env: Any) -> None:
+    """Play a world, export it, save it."""
+
+    @app.post("/api/{env}/play")
+    def play(env: Env, request: PlayRequest) -> Response:
+        world, _ = resolve(env, request.world, request.z)
+        played = env.play(world, request.agent, request.episodes, request.seed, request.size)
+        source = {"world": request.world} if request.world is not None else {"z": request.z}
+        return plain_json({**played, **source, "agent": request.agent, "seed": request.seed})
+
     @app.get("/api/{env}/export.npz")
-    def export_npz(env: Env, world: Annotated[int | None, Query(ge=0)] = None, z: Annotated[str | None, Query(max_length=4096)] = None) -> Response:
-        found, source = world_of(env, world, z)
+    def export_npz(env: Env, world: WorldIndex = None, z: LatentText = None) -> Response:
+        found, source = resolve(env, world, None if z is None else parse_latent(z))
         data = dataset_bytes(one_world_dataset(env, found))
         return Response(data, media_type="application/octet-stream", headers=attachment(f"{env.env}-{export_name(source)}.npz"))
 
-    @app.post("/api/{env}/save")
-    def save(env: Env, request: SaveRequest) -> dict:
-        """Write the world as a one-world dataset to ``<run>/<env>/explorer/`` (a training pool, a fixture)."""
-        if request.world is not None:
-            found, source = env.stored_world(request.world), env.world_summary(request.world)
-        else:
-            latent = check_latent(env, request.z)
-            found, source = env.decode(latent), {"latent": latent.tolist()}
-        folder = env.run.layout(env.env).dir / SAVED_FOLDER
-        path = one_world_dataset(env, found).save(folder / f"{env.env}-{export_name(source)}.npz")
-        return {"saved": str(path)}
-
     @app.get("/api/{env}/export.json")
-    def export_json(env: Env, world: Annotated[int | None, Query(ge=0)] = None, z: Annotated[str | None, Query(max_length=4096)] = None) -> Response:
-        found, source = world_of(env, world, z)
+    def export_json(env: Env, world: WorldIndex = None, z: LatentText = None) -> Response:
+        found, source = resolve(env, world, None if z is None else parse_latent(z))
         body = {"env": env.env, "source": source, "world": {k: v.tolist() for k, v in env.spec.world_to_arrays(found).items()}}
         return Response(json.dumps(body), media_type="application/json", headers=attachment(f"{env.env}-{export_name(source)}.json"))
 
-    return app
+    @app.post("/api/{env}/save")
+    def save(env: Env, request: WorldRequest) -> dict:
+        """Write the world as a one-world dataset to ``<run>/<env>/explorer/`` (a training pool, a fixture)."""
+        found, source = resolve(env, request.world, request.z)
+        folder = env.run.layout(env.env).dir / SAVED_FOLDER
+        return {"saved": str(one_world_dataset(env, found).save(folder / f"{env.env}-{export_name(source)}.npz"))}
 
 
 def plain_json(body: dict) -> Response:

@@ -257,3 +257,9 @@ def test_saving_a_world_is_the_one_write(tmp_path, toy_run, toy_spec):
     assert all(file_hashes(copy)[p] == h for p, h in before.items())
     np.testing.assert_array_equal(WorldDataset.load(saved, env="toy").worlds.walls[0], stored(copy)[2].world["walls"])
     assert client.post("/api/toy/save", json={"z": [0, 0]}).status_code == 400
+
+
+def test_another_sites_page_cannot_use_the_explorer(client):
+    evil = client.post("/api/toy/save", json={"world": 0}, headers={"origin": "http://attacker.example"})
+    assert evil.status_code == 403 and "cross-origin" in evil.json()["error"]
+    assert client.get("/api/run", headers={"origin": "http://127.0.0.1"}).status_code == 200  # the page's own origin

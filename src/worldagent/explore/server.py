@@ -3,7 +3,9 @@
 Safe by default: ``serve`` binds 127.0.0.1; any other host needs a token, which every request
 then carries (``?token=`` once: the page keeps it in a cookie; or the ``X-Worldagent-Token``
 header). Without a token, requests naming another host than the loopback one are refused (a
-web page elsewhere cannot reach the server through DNS rebinding). Requests are checked
+web page elsewhere cannot reach the server through DNS rebinding), and a request carrying
+another site's ``Origin`` is refused always (a page elsewhere cannot make the user's browser
+play or save). Requests are checked
 (latent length, finite and bounded numbers, capped counts, agents and metrics by name from
 the run's own lists): a bad one gets a 4xx with ``{"error": "<one line>"}``. Files come only
 from the package's ``static/`` folder; nothing is unpickled; nothing is written to the run
@@ -29,6 +31,7 @@ import math
 import secrets
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
+from urllib.parse import urlsplit
 
 import numpy as np
 from fastapi import Depends, FastAPI, HTTPException, Query, Request
@@ -277,10 +280,14 @@ def install_errors(app: FastAPI) -> None:
 
 
 def install_guard(app: FastAPI, token: str | None) -> None:
-    """Refuse requests without the token (when there is one), or naming a non-loopback host (when not)."""
+    """Refuse requests from another site's page, without the token (when there is one), or naming a
+    non-loopback host (when not)."""
 
     @app.middleware("http")
     async def guard(request: Request, call_next):
+        origin = request.headers.get("origin")
+        if origin and urlsplit(origin).netloc != request.headers.get("host"):  # another site's page, in the user's browser
+            return error(403, f"cross-origin request from {origin!r} refused; open the explorer's own page.")
         if token is None:
             host = host_name(request.headers.get("host", ""))
             if host not in LOOPBACK:

@@ -75,7 +75,8 @@ def target_score(env, text: str, maximize: bool | None = None) -> TargetScore:
     for metric, _, _ in clauses:
         if metric not in raw:
             raise WorldagentError(f"target metric {metric!r} is computed after episodes, not during training; target one of {', '.join(raw)}.")
-    return TargetScore(text, clauses)
+    shown = text.strip() if maximize is None else f"{text.strip()} ({'maximize' if maximize else 'minimize'})"
+    return TargetScore(shown, clauses)
 
 
 def _episode_metric_names(spec) -> tuple[str, ...]:

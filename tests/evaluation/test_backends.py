@@ -130,3 +130,24 @@ def test_the_search_command_on_ray_matches_local(tmp_path, cluster, racing_vae, 
         assert stored(tmp_path / f"ray{attempt}", "cmaes-max-return-s0") == stored(tmp_path / "local", "cmaes-max-return-s0"), f"attempt {attempt}"
     with RunStore(tmp_path / "ray0") as store:
         assert store.campaign("cmaes-max-return-s0").config["agent"]["kind"] == "callable"
+
+
+def test_many_runs_trained_on_ray_equal_those_trained_here_and_resume_there(tmp_path, cluster):
+    """Issue 28: a program's runs as one Ray task give the agents a local many-run gives, resuming a killed run's checkpoints."""
+    import jax
+    import numpy as np
+
+    from worldagent.agents.distributions import world_distribution
+    from worldagent.agents.many import ManyRun, train_many
+    from worldagent.agents.ppo import PPOConfig
+
+    config = PPOConfig(total_episodes=8, num_envs=4, num_steps=16, num_minibatches=2, update_epochs=1, hidden=(8,))
+    pool = world_distribution("racing", "generator", size=4, seed=0)
+    runs = lambda where: [ManyRun(tmp_path / where / f"s{seed}", seed=seed, distribution=pool) for seed in (0, 1)]  # noqa: E731
+    here = train_many("racing", "ppo", config, runs("here"), progress=False, chunk_updates=2)
+    train_many("racing", "ppo", config, runs("ray"), progress=False, chunk_updates=2, stop_after_chunks=1)  # a killed run's checkpoints
+    there = train_many("racing", "ppo", config, runs("ray"), progress=False, chunk_updates=2, backend=cluster)
+    for a, b in zip(here, there):
+        assert a.episodes == b.episodes >= 8
+        for x, y in zip(jax.tree_util.tree_leaves(a.agent.params), jax.tree_util.tree_leaves(b.agent.params)):
+            np.testing.assert_array_equal(x, y)

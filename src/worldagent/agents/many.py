@@ -21,6 +21,12 @@ orders, so its floats differ from the run alone in the last bits (measured in
 ``tests/agents/test_many.py`` and ``benchmarks/many_runs.py``), and those differences grow
 as training goes on. A resumed many-run continues bit-identically (the same program).
 
+Across machines (``backend``, a Ray backend of ``evaluation.backends``): each program's runs go
+to a Ray worker as one task, which trains them there exactly as here, writing their directories
+(a shared filesystem on a multi-machine cluster); a task whose worker dies is retried by Ray and
+resumes from the runs' checkpoints. The driver then finishes every run from its final checkpoint,
+so what it returns is what a local many-run returns.
+
 Cost: under ``vmap`` a ``lax.cond`` whose predicate differs by run runs both branches. A run whose
 budget is spent keeps computing (and discarding) updates until its group is done; DQN computes
 its learning step during the replay warm-up too; K-FAC's periodic re-inversion is mapped run by
@@ -177,6 +183,7 @@ def train_many(
     stop_after_chunks: int | None = None,
     chunk_updates: int | None = None,
     max_together: int | None = None,
+    backend: Any = None,
 ) -> list[TrainResult]:
     """Train ``runs`` (seeds, arms) of one algorithm and config, as few vmapped programs as their shapes allow.
 
@@ -193,6 +200,8 @@ def train_many(
             (default: the config's).
         max_together: runs per program at most (memory); default ``default_max_together`` of a
             run's state size on the default device.
+        backend: None or a local backend (train here), or a Ray backend
+            (``evaluation.backends.make_backend("ray")``): each program is a task on a worker.
 
     Returns:
         One ``training.TrainResult`` per run, in order; ``wall_seconds`` is its group's.
@@ -204,28 +213,38 @@ def train_many(
         raise WorldagentError("two runs share an output directory; give each run its own out_dir.")
     if max_together is not None and (isinstance(max_together, bool) or not isinstance(max_together, (int, np.integer)) or max_together < 1):
         raise WorldagentError(f"max_together={max_together!r}; use at least 1.")
-    opened = [
-        open_run(
-            spec, algo, config, run.distribution, run.out_dir, seed=run.seed, options=options, params=run.params, resume=resume,
-            distribution_spec=run.distribution_spec, chunk_updates=chunk_updates,
-        )
-        for run in runs
-    ]  # fmt: skip
+    open_one = lambda run, resume: open_run(  # noqa: E731
+        spec, algo, config, run.distribution, run.out_dir, seed=run.seed, options=options, params=run.params, resume=resume,
+        distribution_spec=run.distribution_spec, chunk_updates=chunk_updates,
+    )  # fmt: skip
+    opened = [open_one(run, resume) for run in runs]
     args = _program_args(opened)
     state_bytes = sum(np.asarray(x).nbytes for x in jax.tree_util.tree_leaves(opened[0].state))
     cap = int(max_together or default_max_together(state_bytes))
     groups: dict[tuple, list[int]] = {}
     for i, run in enumerate(opened):
         groups.setdefault(_group_key(run, args[i]), []).append(i)
+    batches = [members[at : at + cap] for members in groups.values() for at in range(0, len(members), cap)]
     walls = [0.0] * len(opened)
+    if getattr(backend, "name", "local") == "ray":
+        tasks = [(spec, algo, config, [runs[i] for i in batch], options, chunk_updates) for batch in batches]
+        for batch, wall in zip(batches, backend.map(_train_batch, tasks, f"training {len(runs)} {algo} runs on Ray", progress)):
+            for i in batch:
+                walls[i] = wall
+        finished = [open_one(run, True) for run in runs]  # each run's final checkpoint, as the workers left it
+        return [finish_run(run, wall) for run, wall in zip(finished, walls)]
     total = sum(int(run.config.episodes) for run in opened)
     title = f"training {len(opened)} {algo} runs on {opened[0].spec.name}"
     with progress_bar(title, total=total, enabled=progress) as advance:
         advance(sum(min(int(run.state.episodes), int(run.config.episodes)) for run in opened))
-        for members in groups.values():
-            for at in range(0, len(members), cap):
-                batch = members[at : at + cap]
-                wall = _train_group([opened[i] for i in batch], [args[i] for i in batch], stop_after_chunks, advance)
-                for i in batch:
-                    walls[i] = wall
+        for batch in batches:
+            wall = _train_group([opened[i] for i in batch], [args[i] for i in batch], stop_after_chunks, advance)
+            for i in batch:
+                walls[i] = wall
     return [finish_run(run, wall) for run, wall in zip(opened, walls)]
+
+
+def _train_batch(spec, algo: str, config, runs: list[ManyRun], options, chunk_updates) -> float:
+    """A Ray task: one program's runs trained on this worker (resuming their checkpoints); its wall seconds."""
+    results = train_many(spec, algo, config, runs, options=options, progress=False, resume=True, chunk_updates=chunk_updates, max_together=len(runs))
+    return results[0].wall_seconds

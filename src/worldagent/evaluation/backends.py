@@ -9,7 +9,8 @@ as for local runs.
 - ``LocalBackend``: one batch after another here (the local evaluator already uses every local
   device).
 - ``RayBackend`` (extra ``ray``): batches go to Ray tasks, one per worker, each running the same
-  evaluator (jitted or host). A task whose worker dies is retried by Ray (``max_retries``), and
+  evaluator (jitted or host); ``map`` runs any function's tasks the same way (training programs,
+  ``agents.many``). A task whose worker dies is retried by Ray (``max_retries``), and
   only the driver writes to the store, so nothing is lost or counted twice. ``address`` joins a
   running cluster (``ray start --head`` on one machine, then ``--ray-address HOST:6379``);
   without one a local cluster starts.
@@ -80,12 +81,29 @@ class RayBackend:
         while pending:
             done, _ = self.ray.wait(list(pending), num_returns=1)
             slots = pending.pop(done[0])
-            try:
-                outcomes = self.ray.get(done[0])
-            except self.ray.exceptions.RayTaskError as error:  # the evaluator's own error, e.g. a bad agent
-                cause = error.cause if isinstance(getattr(error, "cause", None), Exception) else error
-                raise WorldagentError(str(cause).splitlines()[0] if str(cause) else type(cause).__name__) from None
-            yield slots, outcomes
+            yield slots, self._get(done[0])
+
+    def map(self, function: Callable, tasks: Sequence[tuple], title: str = "", progress: bool = False) -> list:
+        """``[function(*task) for task in tasks]``, each task on a worker (retried if its worker dies), in order."""
+        from worldagent.progress import progress_bar
+
+        remote = self.ray.remote(max_retries=TASK_RETRIES)(function)
+        pending = {remote.remote(*task): i for i, task in enumerate(tasks)}
+        results: list = [None] * len(tasks)
+        with progress_bar(title or "tasks on Ray", total=len(tasks), enabled=progress) as advance:
+            while pending:
+                done, _ = self.ray.wait(list(pending), num_returns=1)
+                results[pending.pop(done[0])] = self._get(done[0])
+                advance(1)
+        return results
+
+    def _get(self, ref: Any) -> Any:
+        """A finished task's result; the task's own error (e.g. a bad agent) as one line."""
+        try:
+            return self.ray.get(ref)
+        except self.ray.exceptions.RayTaskError as error:
+            cause = error.cause if isinstance(getattr(error, "cause", None), Exception) else error
+            raise WorldagentError(str(cause).splitlines()[0] if str(cause) else type(cause).__name__) from None
 
     def _ship(self, evaluate: Callable) -> tuple[str, Any]:
         """The evaluator in the object store, once per evaluator, with a token workers cache it under."""

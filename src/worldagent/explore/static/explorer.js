@@ -7,6 +7,7 @@ const state = { run: null, env: null, map: null, metric: null, world: null, z: n
 const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
 const TRAILS = ["#1f5fe0", "#e0421f", "#1fa84a", "#c51fe0", "#e0a01f", "#1fc7e0", "#7a4b1f", "#555555"];
 const MAP_PAD = 24;
+const LONG_EPISODE = 400, RECENT_TRAIL = 60;  // steps
 
 // -- plumbing -----------------------------------------------------------------------------
 
@@ -238,9 +239,10 @@ function showMetrics(i, result) {
 let animation = null;
 function animate(longest) {
   cancelAnimationFrame(animation);
-  const start = performance.now(), stepsPerSecond = 60;
+  const start = performance.now(), stepsPerSecond = Math.max(60, longest / 6);  // long episodes play in about 6 s
   const tick = (now) => {
-    const frame = Math.min(longest, Math.floor(((now - start) / 1000) * stepsPerSecond));
+    // a frame's timestamp may precede the click's performance.now(): never a negative step
+    const frame = Math.min(longest, Math.max(0, Math.floor(((now - start) / 1000) * stepsPerSecond)));
     state.players.forEach((r, i) => drawFrame(i, r, frame));
     $("frame").textContent = String(frame);
     if (frame < longest) animation = requestAnimationFrame(tick);
@@ -268,9 +270,12 @@ function drawFrame(i, result, frame) {
       ctx.globalAlpha = 0.8;
       ctx.lineWidth = 2.5;
       ctx.beginPath();
-      for (let t = 0; t <= last; t++) {
+      // long episodes keep a recent trail only; an agent off the map (tagged out) breaks its trail
+      const first = episode.path.length > LONG_EPISODE ? Math.max(0, last - RECENT_TRAIL) : 0;
+      for (let t = first; t <= last; t++) {
         const [x, y] = episode.path[t][a];
-        if (t === 0) ctx.moveTo(x * scale, y * scale); else ctx.lineTo(x * scale, y * scale);
+        const joined = t > first && episode.present[t][a] && episode.present[t - 1][a];
+        if (joined) ctx.lineTo(x * scale, y * scale); else ctx.moveTo(x * scale, y * scale);
       }
       ctx.stroke();
       ctx.globalAlpha = 1;

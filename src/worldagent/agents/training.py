@@ -108,12 +108,12 @@ def plot_curve(rows: list[dict], path: Path, spec) -> Path:
 
 
 def _check_resumable(out_dir: Path, run: dict) -> None:
-    """Refuse a checkpoint of another run (algorithm, env, options, seed or config) before compiling."""
+    """Refuse a checkpoint of another run (algorithm, env, options, seed, config or world distribution) before compiling."""
     try:
         previous = json.loads((out_dir / RUN_FILE).read_text())
     except (OSError, ValueError):
         raise WorldagentError(f"{out_dir} has a checkpoint but no readable {RUN_FILE}; start afresh with resume=False (--no-resume).") from None
-    for field in ("algorithm", "env", "options", "seed", "config"):
+    for field in ("algorithm", "env", "options", "seed", "config", "distribution"):  # a curriculum changes the state's shape
         if previous.get(field) != run[field]:
             raise WorldagentError(
                 f"{out_dir} holds a run with another {field} ({previous.get(field)!r}); use another output directory or resume=False (--no-resume)."

@@ -71,6 +71,8 @@ class EnvSession:
     means: dict[str, np.ndarray]
     agents: dict[str, str]
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    cache_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    pictures: OrderedDict = field(default_factory=OrderedDict, repr=False)
     _loaded: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -275,14 +277,17 @@ class EnvSession:
     def stored_picture(self, index: int, size: int) -> bytes:
         """PNG of stored world ``index``, kept for the next ask (maps and tables show the same worlds again and again)."""
         key = (index, size)
-        cache = self._loaded.setdefault("pictures", OrderedDict())
-        if key not in cache:
-            picture = self.picture(self.stored_world(index), size)
-            cache[key] = picture
-            while len(cache) > PICTURE_CACHE:
-                cache.popitem(last=False)
-        cache.move_to_end(key)
-        return cache[key]
+        with self.cache_lock:  # requests run in threads: one of them at a time reorders the cache
+            found = self.pictures.get(key)
+            if found is not None:
+                self.pictures.move_to_end(key)
+                return found
+        picture = self.picture(self.stored_world(index), size)
+        with self.cache_lock:
+            self.pictures[key] = picture
+            while len(self.pictures) > PICTURE_CACHE:
+                self.pictures.popitem(last=False)
+        return picture
 
     def setup(self, agent: str):
         """``experiments.Setup`` of one agent label (loaded once)."""

@@ -36,11 +36,11 @@ from worldagent.influence.experiment import (
     compare_agents,
     round_result,
     search_worlds,
-    train_agents,
     trained_policies,
     value_ranges,
 )
 from worldagent.influence.statistics import json_safe
+from worldagent.influence.training import train_agents
 from worldagent.influence.worlds import select_worlds
 
 

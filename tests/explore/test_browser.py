@@ -2,7 +2,8 @@
 
 Loads the page with no console errors, opens a world from the map, moves a latent slider and
 sees the world redraw, presses play and sees the animation advance, opens a world from an atlas
-cell and from the failures table, and exports a world that loads back as a ``WorldDataset``.
+cell and from the failures table, exports a world that loads back as a ``WorldDataset``, and
+reopens a latent with its agent from the page's link in a fresh page.
 
 By default it runs over the toy run of ``conftest.py``. ``WORLDAGENT_EXPLORER_RUN=runs/quick``
 (and ``WORLDAGENT_EXPLORER_ENV=racing``) runs it over a real run instead;
@@ -172,7 +173,7 @@ def test_an_atlas_cell_opens_its_world(page):
     assert page.text_content("#world-title").startswith(f"world {cell['world']} ")
 
 
-def test_a_failure_opens_and_exports(page, tmp_path):
+def test_a_failure_opens_and_exports(page, browser, tmp_path):
     from worldagent.worlds.dataset import WorldDataset
 
     page.click("button[data-view='failures']")
@@ -189,4 +190,17 @@ def test_a_failure_opens_and_exports(page, tmp_path):
     path = tmp_path / "world.npz"
     download.value.save_as(path)
     assert len(WorldDataset.load(path)) == 1
-    assert f"w={index}" in page.get_attribute("#permalink", "href")
+    link = page.get_attribute("#permalink", "href")
+    assert f"w={index}" in link
+    agent = page.eval_on_selector_all("#agent option", "options => options.map(o => o.value)")[-1]
+    page.select_option("#agent", agent)  # the link follows the agents chosen
+    page.evaluate("explorer.openLatent([...explorer.state.z].map((v, i) => i === 0 ? 0.5 : v))")
+    link = page.get_attribute("#permalink", "href")
+    assert "z=0.500%2C" in link and f"agent={agent.replace('/', '%2F')}" in link
+    reopened = browser.new_page()  # a fresh page: only the link carries the state
+    reopened.goto(link)
+    reopened.wait_for_selector("body[data-ready='1']", timeout=WAIT_MS)
+    reopened.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
+    assert reopened.input_value("#agent") == agent and "G(z)" in reopened.text_content("#world-title")
+    assert reopened.input_value("#sliders input >> nth=0") == "0.5"
+    reopened.close()

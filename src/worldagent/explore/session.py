@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import io
 import threading
-from collections import OrderedDict
+from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,8 +78,9 @@ class EnvSession:
     @classmethod
     def open(cls, run: Run, env: str) -> EnvSession:
         spec = registry.get(env)
-        evaluations = [e for e in run.evaluations(env) if len(e.latent)]
-        dim = run_latent_dim(run, env, evaluations)
+        stored = [e for e in run.evaluations(env) if len(e.latent)]
+        dim = run_latent_dim(run, env, stored)
+        evaluations = [e for e in stored if len(e.latent) == dim]  # a store searched with another generator keeps its own latents
         latents = np.stack([e.latent for e in evaluations]).astype(np.float64) if evaluations else np.zeros((0, dim))
         projection = views.principal_projection(latents if len(latents) else np.zeros((1, dim)))
         names = views.scalar_metrics(evaluations, spec.metrics.names)
@@ -322,9 +323,10 @@ class EnvSession:
 
 
 def run_latent_dim(run: Run, env: str, evaluations: list) -> int:
-    """The latent size: the stored latents', else the generator's."""
+    """The latent size: the stored latents' (the commonest, if campaigns differ), else the generator's."""
     if evaluations:
-        return len(evaluations[0].latent)
+        sizes = Counter(len(e.latent) for e in evaluations)
+        return sizes.most_common(1)[0][0]
     if run.has_generator(env):
         return run.generator(env).latent_dim
     raise WorldagentError(f"{run.run_dir} has neither stored worlds nor a generator for {env}; run `worldagent reproduce --out {run.run_dir}`.")

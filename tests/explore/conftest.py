@@ -8,6 +8,7 @@ explorer plays the toy's scripted ones.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 
@@ -29,16 +30,30 @@ def cell_centres(positions, world, size: int):
     return np.stack([(cells[..., 1] + 0.5) * size / side, (cells[..., 0] + 0.5) * size / side], axis=-1)
 
 
-@pytest.fixture(scope="session")
-def toy_spec():
-    """The toy env, with a picture locator and a failure event, registered for the session."""
+def explorer_toy():
+    """The toy env's spec with a picture locator and a failure event (what the explorer's views use)."""
     import toy_env
 
-    spec = dataclasses.replace(toy_env.SPEC, pictures=dataclasses.replace(toy_env.SPEC.pictures, locate=cell_centres), failure="reached < 0.5")
-    added = spec.name not in registry.names()
+    return dataclasses.replace(toy_env.SPEC, pictures=dataclasses.replace(toy_env.SPEC.pictures, locate=cell_centres), failure="reached < 0.5")
+
+
+@contextlib.contextmanager
+def registered(spec):
+    """``spec`` registered while the block runs; whatever had its name before comes back after
+    (other test files on this worker see the toy as they expect)."""
+    before = registry.get(spec.name) if spec.name in registry.names() else None
     registry.register(spec, replace=True)
-    yield spec
-    registry.unregister(spec.name) if added else registry.register(toy_env.SPEC, replace=True)
+    try:
+        yield spec
+    finally:
+        registry.unregister(spec.name) if before is None else registry.register(before, replace=True)
+
+
+@pytest.fixture(scope="module")
+def toy_spec():
+    """The explorer's toy, registered for one test file."""
+    with registered(explorer_toy()) as spec:
+        yield spec
 
 
 def fake_episodes(rng, failing: bool) -> list[dict]:
@@ -56,15 +71,19 @@ def store_campaign(store, spec, dataset, name: str, config: dict, latents: np.nd
 
 
 @pytest.fixture(scope="session")
-def toy_run(toy_spec, tmp_path_factory):
-    """The run directory (see the module docstring)."""
+def toy_run(tmp_path_factory):
+    """The run directory (see the module docstring), built once per worker."""
+    with registered(explorer_toy()) as spec:
+        return write_toy_run(spec, tmp_path_factory.mktemp("explore") / "run")
+
+
+def write_toy_run(toy_spec, run_dir):
     from worldagent.search.atlas import Grid
     from worldagent.store import RunStore
     from worldagent.worlds.dataset import make_dataset
     from worldagent.worlds.generator import build_generator, save_generator
     from worldagent.worlds.vae import TrainedVAE, VAEConfig, make_vae
 
-    run_dir = tmp_path_factory.mktemp("explore") / "run"
     layout = RunLayout(run_dir, toy_spec.name)
     dataset = make_dataset(toy_spec.name, 64, 0, progress=False)
     layout.dir.mkdir(parents=True)
@@ -87,8 +106,8 @@ def toy_run(toy_spec, tmp_path_factory):
     return run_dir
 
 
-@pytest.fixture(scope="session")
-def session(toy_run):
+@pytest.fixture(scope="module")
+def session(toy_spec, toy_run):
     """The explorer's ``Session`` over the toy run (its generator and agents load on first use)."""
     from worldagent.explore.session import Session
 

@@ -51,6 +51,8 @@ def explorer_url(request):
     from worldagent.explore.server import make_app
     from worldagent.explore.session import Session
 
+    if not os.environ.get("WORLDAGENT_EXPLORER_RUN"):
+        request.getfixturevalue("toy_spec")  # registered while this file's tests run
     run_dir = os.environ.get("WORLDAGENT_EXPLORER_RUN") or request.getfixturevalue("toy_run")
     port = free_port()
     server = uvicorn.Server(uvicorn.Config(make_app(Session.open(run_dir)), host="127.0.0.1", port=port, log_level="warning"))

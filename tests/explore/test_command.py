@@ -30,7 +30,7 @@ def test_a_non_local_host_gets_a_token(monkeypatch, session):
     assert lines[0].startswith("worldagent explore: http://127.0.0.1:8765/ ")  # local: no token needed
 
 
-def test_a_store_with_its_generator_is_explored_without_a_run_directory(toy_run):
+def test_a_store_with_its_generator_is_explored_without_a_run_directory(toy_spec, toy_run):
     from fastapi.testclient import TestClient
 
     from worldagent.commands.explore import open_run

@@ -134,6 +134,10 @@ def test_map_world_sliders_and_play(page):
     page.wait_for_function("(document.querySelector('#world-img').dataset.src || '').includes('/decode.png?z=')", timeout=WAIT_MS)
     page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
     assert "G(z)" in page.text_content("#world-title")
+    page.click("button[data-view='map']")
+    marker = [float(v) for v in page.get_attribute("#map-canvas", "data-marker").split(",")]
+    assert marker != [x, y]  # the map marks where the sliders moved the world to
+    page.click("button[data-view='world']")
 
     agents = page.eval_on_selector_all("#agent2 option", "options => options.map(o => o.value)")
     page.select_option("#agent2", agents[-1])

@@ -49,6 +49,7 @@ function show(view) {
   for (const button of document.querySelectorAll("#tabs button")) button.classList.toggle("active", button.dataset.view === view);
   for (const section of document.querySelectorAll(".view")) section.hidden = section.id !== `view-${view}`;
   state.view = view;
+  if (view === "map" && state.map) drawMap();
   if (view === "atlas") loadAtlas();
   if (view === "failures") loadFailures();
   if (view !== "world") writeHash({ view, env: state.env, metric: state.metric });
@@ -103,6 +104,21 @@ function drawMap() {
   }
   $("map-legend").innerHTML = `${fmt(lo)} <i></i> ${fmt(hi)}`;
   canvas.dataset.metric = state.metric;
+  drawMarker(ctx, place);
+}
+
+function drawMarker(ctx, place) {
+  // the world open in the World view (a stored one, or G(z) as the sliders left it), on the same projection
+  if (!state.z || state.z.length !== state.map.centre.length) { $("map-canvas").dataset.marker = ""; return; }
+  const centred = state.z.map((v, d) => v - state.map.centre[d]);
+  const [x, y] = state.map.axes.map((axis) => axis.reduce((sum, a, d) => sum + a * centred[d], 0));
+  const [px, py] = place(x, y);
+  ctx.strokeStyle = "#d62728";
+  ctx.lineWidth = 2.5;
+  ctx.beginPath();
+  ctx.arc(px, py, 9, 0, 2 * Math.PI);
+  ctx.stroke();
+  $("map-canvas").dataset.marker = `${px.toFixed(1)},${py.toFixed(1)}`;
 }
 
 function nearestPoint(event) {

@@ -547,8 +547,8 @@ def influence(
 ) -> dict:
     """Train agents on worlds with a property and compare them with default training (paper §6.2, Figure 8).
 
-    ``influence.experiment.influence`` with the setup's env, agents, generator, options and
-    repeats; see it for the arguments. ``algo`` None: ``spec.default_algorithm``.
+    ``influence.experiment.influence`` with the setup's env, agents, generator, options,
+    repeats and backend (where the agents train); see it for the arguments. ``algo`` None: ``spec.default_algorithm``.
 
     Returns:
         The content of ``run_dir/influence.json``.
@@ -578,6 +578,7 @@ def influence(
         progress=progress,
         runs_per_program=runs_per_program,
         rounds=rounds,
+        backend=setup.backend,
     )
 
 

@@ -12,6 +12,7 @@ from worldagent.commands.options import (
     GENERATOR_HELP,
     algo_help,
     algorithm,
+    backend,
     check_counts,
     check_run_dir,
     check_seed,
@@ -19,6 +20,7 @@ from worldagent.commands.options import (
     env_argument,
     given_options,
     option_flag,
+    ray_address_flag,
     set_flag,
     stochastic_flag,
 )
@@ -94,6 +96,8 @@ def influence_command(
     settings: list[str] | tuple[str, ...] = (),
     rounds: int = 1,
     runs_per_program: int | None = None,
+    backend_name: str = "local",
+    ray_address: str | None = None,
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.agents.algorithms import parse_settings, training_config
@@ -119,7 +123,8 @@ def influence_command(
     from worldagent import experiments
     from worldagent.reports.influence import influence_figure
 
-    setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, stochastic=stochastic, repeats=repeats)
+    where = backend(backend_name, ray_address)
+    setup = experiments.setup(env, agent, generator, options=options, greedy=greedy, stochastic=stochastic, repeats=repeats, backend=where)
     # with --set, the config of the options the agents train with (the saved agent's fill those not given)
     config = training_config(setup.spec, algo, episodes, options=setup.options, **chosen) if chosen else None
     result = experiments.influence(
@@ -188,6 +193,8 @@ def register(app: typer.Typer) -> None:
         runs_per_program: int = typer.Option(
             None, "--runs-per-program", help="Agents trained as one vmapped program at most (memory; default: 2 on a CPU, from memory on a GPU)."
         ),
+        backend_name: str = typer.Option("local", "--backend", help="Where the agents train: local, or ray (each program a task on a worker)."),
+        ray_address: str = ray_address_flag(),
     ) -> None:
         """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
         influence_command(
@@ -212,4 +219,6 @@ def register(app: typer.Typer) -> None:
             settings,
             rounds,
             runs_per_program,
+            backend_name,
+            ray_address,
         )

@@ -209,6 +209,7 @@ def influence(
     progress: bool = True,
     runs_per_program: int | None = None,
     rounds: int = 1,
+    backend: Any = None,
 ) -> dict:
     """Influence agents: train on worlds with a property, compare with default training (paper §6.2).
 
@@ -245,6 +246,8 @@ def influence(
             round r >= 2 searches again with each seed's influenced agent of round r - 1, adds
             the worlds it selects to that seed's influenced worlds and retrains on them, kept in
             ``run_dir/round-<r>/``.
+        backend: where the agents train: None here, or a Ray backend (``evaluation.backends``),
+            each program of runs a task on a worker (``many.train_many``).
 
     Returns:
         The content of ``run_dir/influence.json`` (with NaN where the file has null); with
@@ -295,7 +298,9 @@ def influence(
             run_dir, "training", {"selection": selection.describe(), "algo": algo, "training": training, "greedy": bool(greedy), "options": options}
         )
         save_influenced_worlds(run_dir / WORLDS_FILE, spec, worlds, latents, values)
-        agents, timings["train"] = train_all(run_dir, spec, algo, config, G, worlds, selection, seeds, options, params, progress, runs_per_program)
+        agents, timings["train"] = train_all(
+            run_dir, spec, algo, config, G, worlds, selection, seeds, options, params, progress, runs_per_program, backend
+        )
         clock = time.perf_counter()
         agent_dirs = {name: run_dir / "agents" / name / record["policy"] for name, record in agents.items()}
         per_seed = compare_agents(store, spec, env, params, G, trained_policies(agent_dirs, spec, greedy), counts, progress)
@@ -308,7 +313,9 @@ def influence(
     if rounds > 1:
         from worldagent.influence.rounds import later_rounds
 
-        job = dict(spec=spec, env=env, params=params, G=G, selection=selection, algo=algo, config=config, options=options, counts=counts)
+        job = dict(
+            spec=spec, env=env, params=params, G=G, selection=selection, algo=algo, config=config, options=options, counts=counts, backend=backend
+        )
         result["rounds"] = later_rounds(run_dir, job, settings, seeds, per_seed["default"], rounds, greedy, runs_per_program, progress)
         write_text(run_dir / RESULT_FILE, json.dumps(json_safe(result), indent=1))
     return result

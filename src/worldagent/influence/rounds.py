@@ -138,7 +138,9 @@ def one_round(
         timings["search"] += time.perf_counter() - clock
     described = lambda s: f"{len(pools[s][1])} worlds with {selection.describe()} (round {r})"  # noqa: E731
     jobs = {f"influenced-s{s}": (here / "agents" / f"influenced-s{s}", s, WorldPool.create(pools[s][0]), described(s)) for s in seeds}
-    agents, timings["train"] = train_agents(jobs, spec, job["algo"], job["config"], job["options"], job["params"], runs_per_program, progress)
+    agents, timings["train"] = train_agents(
+        jobs, spec, job["algo"], job["config"], job["options"], job["params"], runs_per_program, progress, job.get("backend")
+    )
     clock = time.perf_counter()
     policies = trained_policies({name: here / "agents" / name / record["policy"] for name, record in agents.items()}, spec, greedy)
     influenced = compare_agents(store, spec, job["env"], job["params"], job["G"], policies, counts, progress, prefix=f"round{r}-")["influenced"]

@@ -49,10 +49,13 @@ def check_runs_per_program(value: Any) -> int | None:
     return value
 
 
-def train_agents(jobs: dict[str, tuple], spec, algo: str, config: Any, options: Any, params: Any, runs_per_program: int | None, progress: bool):
+def train_agents(
+    jobs: dict[str, tuple], spec, algo: str, config: Any, options: Any, params: Any, runs_per_program: int | None, progress: bool, backend: Any = None
+):
     """Train the unfinished of ``jobs`` ({name: (out dir, seed, distribution, described)}) as few programs as
     their shapes allow (``many.train_many``: seeds together, and arms whose pools pad to one shape),
-    each resuming its own checkpoint; returns ({name: record}, {name: seconds of its program})."""
+    each resuming its own checkpoint, here or (``backend``: Ray) each program as a task on a worker;
+    returns ({name: record}, {name: seconds of its program})."""
     from worldagent.agents.many import ManyRun, train_many
 
     records = {name: trained_record(job[0]) for name, job in jobs.items()}
@@ -61,7 +64,7 @@ def train_agents(jobs: dict[str, tuple], spec, algo: str, config: Any, options: 
     if pending:
         runs = [ManyRun(jobs[n][0], seed=int(jobs[n][1]), distribution=jobs[n][2], distribution_spec=jobs[n][3], params=params) for n in pending]
         cap = runs_per_program if runs_per_program is not None else default_runs_per_program()
-        results = train_many(spec, algo, config, runs, options=options, progress=progress, resume=True, max_together=cap)
+        results = train_many(spec, algo, config, runs, options=options, progress=progress, resume=True, max_together=cap, backend=backend)
         for name, result in zip(pending, results):
             records[name] = mark_trained(jobs[name][0], result, jobs[name][1], jobs[name][3])
             timings[name] = result.wall_seconds
@@ -69,7 +72,19 @@ def train_agents(jobs: dict[str, tuple], spec, algo: str, config: Any, options: 
 
 
 def train_all(
-    run_dir: Path, spec, algo: str, config, G, worlds, selection: Selection, seeds: list[int], options, params, progress: bool, runs_per_program=None
+    run_dir: Path,
+    spec,
+    algo: str,
+    config,
+    G,
+    worlds,
+    selection: Selection,
+    seeds: list[int],
+    options,
+    params,
+    progress: bool,
+    runs_per_program=None,
+    backend: Any = None,
 ):
     """Step (c): one default and one influenced agent per seed, same algorithm, budget and seed; (records, timings)."""
     from worldagent.agents.distributions import LatentWorlds, WorldPool
@@ -80,4 +95,4 @@ def train_all(
         "influenced": (WorldPool.create(worlds), f"{count} worlds with {selection.describe()}"),
     }
     jobs = {f"{label}-s{s}": (run_dir / "agents" / f"{label}-s{s}", s, *distributions[label]) for s in seeds for label in LABELS}
-    return train_agents(jobs, spec, algo, config, options, params, runs_per_program, progress)
+    return train_agents(jobs, spec, algo, config, options, params, runs_per_program, progress, backend)

@@ -181,10 +181,11 @@ class TrainedVAE:
         config = VAEConfig(**{**meta["config"], "encoder": tuple(meta["config"]["encoder"]), "decoder": tuple(meta["config"]["decoder"])})
         cell_shape = tuple(meta["cell_shape"])
         model = make_vae(int(np.prod(cell_shape)), config)
-        template = model.init(jax.random.key(0), jnp.zeros((1, int(np.prod(cell_shape)))), jax.random.key(0))["params"]
+        # shapes only (eval_shape): initialising the weights just to overwrite them cost seconds
+        template = jax.eval_shape(lambda: model.init(jax.random.key(0), jnp.zeros((1, int(np.prod(cell_shape)))), jax.random.key(0))["params"])
         try:
-            params = serialization.from_bytes(template, blob)
-            shapes_match = jax.tree_util.tree_all(jax.tree_util.tree_map(lambda a, b: np.shape(a) == np.shape(b), template, params))
+            params = jax.tree_util.tree_map(jnp.asarray, serialization.from_bytes(template, blob))
+            shapes_match = jax.tree_util.tree_all(jax.tree_util.tree_map(lambda a, b: tuple(a.shape) == np.shape(b), template, params))
         except (ValueError, KeyError, TypeError) as error:
             raise WorldagentError(f"VAE weights in {directory} do not fit the architecture in vae.json ({type(error).__name__}); {remedy}.") from None
         if not shapes_match:

@@ -132,6 +132,7 @@ def test_the_search_command_on_ray_matches_local(tmp_path, cluster, racing_vae, 
         assert store.campaign("cmaes-max-return-s0").config["agent"]["kind"] == "callable"
 
 
+@pytest.mark.slow  # ~16 s of one worker: the default run was 307 s of its 300 with it
 def test_many_runs_trained_on_ray_equal_those_trained_here_and_resume_there(tmp_path, cluster):
     """Issue 28: a program's runs as one Ray task give the agents a local many-run gives, resuming a killed run's checkpoints."""
     import jax

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -40,6 +42,7 @@ def test_crash_penalty_warms_up_over_the_given_fraction():
         np.testing.assert_allclose(training_params(params, warming, jnp.float32(fraction)).crash_penalty, expected, rtol=1e-6)
 
 
+@pytest.mark.slow  # ~10 s; quadratic inputs' shapes and gradients are tested in the default run
 def test_ppo_with_quadratic_inputs_learns_on_road_rays(racing_pool):
     """A tiny budget on 4 tracks: the agent on the rays observation stays on the road far longer than at the start."""
     env = ParticleRacing(observation="rays", reach=64)

@@ -204,6 +204,7 @@ def test_agents_that_failed_to_learn_are_warned_of_and_recorded(racing_run, raci
     assert training_failures(registry.get("harvest"), {"default": {"0": {"conflict": 0.0}}}) == {}  # harvest has no check
 
 
+@pytest.mark.slow  # ~14 s; the atlas is tested by default in tests/search, the influence search by the harvest test above
 def test_an_atlas_search_collects_distinct_worlds_with_the_property(tmp_path, racing_generator):
     result = influence(
         tmp_path,

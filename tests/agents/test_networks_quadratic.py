@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import pytest
-
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from worldagent.agents.distributions import WorldPool
 from worldagent.agents.networks import ActorCritic, build_network, network_config, quadratic_features

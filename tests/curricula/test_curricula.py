@@ -159,6 +159,7 @@ def test_a_killed_curriculum_run_resumes_with_the_identical_buffer(toy, tmp_path
     assert resumed.resumed_from_update == 4
     finals = [load_snapshots(path)[-1] for path in (tmp_path / "whole", tmp_path / "killed")]
     assert len(finals[0]["score"]) >= 4  # the buffer filled and replay began (min_fill 0.25 of 16)
+    assert len(np.unique(finals[0]["z"], axis=0)) == len(finals[0]["z"])  # no latent held twice
     for name in ("z", "score", "count", "age"):
         np.testing.assert_array_equal(finals[0][name], finals[1][name])
     leaves = [jax.tree_util.tree_leaves(r.agent.params) for r in (whole, resumed)]

@@ -246,7 +246,8 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
         return carry, ended
 
     zero = jnp.zeros(runner.slot.shape, jnp.float32)
-    start = (runner.z, runner.slot, runner.potential, runner.potential_steps, zero > 0, zero, zero)
+    already = jnp.all(runner.z == runner.pending_z, axis=-1)  # an env given no new world plays its pending one now
+    start = (runner.z, runner.slot, runner.potential, runner.potential_steps, already, zero, zero)
     carry, (zs, slots, scores, valid, weights) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
     z, slot, total, steps, _, pending_sum, pending_count = carry
     # one entry per env for the episodes its pending world ended within the segment (their mean score),
@@ -257,7 +258,8 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
         flat(scores, pending_sum / jnp.maximum(pending_count, 1.0)), flat(valid, pending_count > 0),
     )  # fmt: skip
     slot = curriculum.slot_of(state, z, slot)
-    return runner.replace(curriculum=state, z=z, slot=slot, potential=total, potential_steps=steps), weights
+    pending_slot = curriculum.slot_of(state, runner.pending_z, runner.pending_slot)  # a pending world kept for later segments too
+    return runner.replace(curriculum=state, z=z, slot=slot, pending_slot=pending_slot, potential=total, potential_steps=steps), weights
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[jax.Array, jax.Array]:

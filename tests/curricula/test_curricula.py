@@ -262,9 +262,11 @@ def test_decoded_worlds_go_to_the_envs_that_used_their_pending_world(toy):
         pending_z: jax.Array
         pending_slot: jax.Array
         used: jax.Array
+        pending_replayed: jax.Array
 
-    old = Runner(jnp.arange(5.0), jnp.zeros((5, 1)), jnp.full(5, 7), jnp.array([True, False, True, True, False]))
+    old = Runner(jnp.arange(5.0), jnp.zeros((5, 1)), jnp.full(5, 7), jnp.array([True, False, True, True, False]), jnp.ones(5, bool))
     new = refill(old, Draw(jnp.array([[1.0], [2.0]]), jnp.array([-1, 3]), jnp.array([10.0, 20.0])))
     np.testing.assert_array_equal(new.pending, [10.0, 1.0, 20.0, 3.0, 4.0])  # envs 0 and 2 served in order, env 3 waits
     np.testing.assert_array_equal(new.pending_slot, [-1, 7, 3, 7, 7])
     np.testing.assert_array_equal(new.used, [False, False, False, True, False])
+    np.testing.assert_array_equal(new.pending_replayed, [False, True, True, True, True])  # slot 3 came from the buffer

@@ -60,6 +60,8 @@ class EnvRunner:
             episode so far (the steps already scored), and how many steps that sum holds.
         pending: each env's pending world (a batched world pytree, leading axis B).
         used: bool[B] the pending world was started since it was drawn (it needs a new one).
+        replayed, pending_replayed: bool[B] the world in play / pending was drawn by replay
+            from the buffer (robust PLR learns only there), not merely found in it later.
     """
 
     obs: jax.Array
@@ -75,6 +77,8 @@ class EnvRunner:
     potential_steps: jax.Array
     pending: Any
     used: jax.Array
+    replayed: jax.Array
+    pending_replayed: jax.Array
 
 
 @struct.dataclass
@@ -114,10 +118,11 @@ def init_runner(key: jax.Array, env, env_params, distribution, num_envs: int) ->
     draw = curriculum.sample(state, key_worlds, num_envs)
     obs, env_state = jax.vmap(env.reset, in_axes=(0, 0, None))(jax.random.split(key_reset, num_envs), draw.worlds, env_params)
     zeros = jnp.zeros(num_envs, jnp.float32)
-    used = jnp.ones(num_envs, bool)
+    used, replayed = jnp.ones(num_envs, bool), draw.slot >= 0
     return EnvRunner(
-        obs, env_state, zeros, jnp.zeros(num_envs, jnp.int32), state, draw.z, draw.slot, draw.z, draw.slot, zeros, zeros, draw.worlds, used
-    )
+        obs, env_state, zeros, jnp.zeros(num_envs, jnp.int32), state, draw.z, draw.slot, draw.z, draw.slot, zeros, zeros, draw.worlds, used,
+        replayed, replayed,
+    )  # fmt: skip
 
 
 def draws_per_segment(distribution, num_envs: int, num_steps: int) -> int:
@@ -135,7 +140,9 @@ def refill(runner: EnvRunner, draw) -> EnvRunner:
     """The runner with the drawn worlds given, in env order, to envs whose pending world was used."""
     count = draw.slot.shape[0]
     if count == runner.used.shape[0]:  # one per env: all replaced (what training always did)
-        return runner.replace(pending=draw.worlds, pending_z=draw.z, pending_slot=draw.slot, used=jnp.zeros_like(runner.used))
+        return runner.replace(
+            pending=draw.worlds, pending_z=draw.z, pending_slot=draw.slot, used=jnp.zeros_like(runner.used), pending_replayed=draw.slot >= 0
+        )
     rank = jnp.cumsum(runner.used) - 1
     take = runner.used & (rank < count)
     index = jnp.clip(rank, 0, count - 1)
@@ -143,6 +150,7 @@ def refill(runner: EnvRunner, draw) -> EnvRunner:
     return runner.replace(
         pending=jax.tree_util.tree_map(pick, draw.worlds, runner.pending), pending_z=pick(draw.z, runner.pending_z),
         pending_slot=pick(draw.slot, runner.pending_slot), used=runner.used & ~take,
+        pending_replayed=pick(draw.slot >= 0, runner.pending_replayed),
     )  # fmt: skip
 
 
@@ -232,24 +240,24 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
     potential = positive_value_loss(targets, trajectory.value)
 
     def one_step(carry, step):
-        z, slot, total, steps, on_pending, pending_sum, pending_count = carry
+        z, slot, replayed, total, steps, on_pending, pending_sum, pending_count = carry
         step_potential, done, metrics = step
         total, steps = total + step_potential, steps + 1.0
         score = curriculum.episode_score(total / steps, metrics)
-        ended = (z, slot, score, done & ~on_pending, curriculum.learns_from(slot))  # ended: the segment's first world
+        ended = (z, slot, score, done & ~on_pending, curriculum.learns_from(replayed))  # ended: the segment's first world
         again = done & on_pending  # the pending world's episodes are pooled into one entry below
         carry = (
             jnp.where(done[:, None], runner.pending_z, z), jnp.where(done, runner.pending_slot, slot),
-            jnp.where(done, 0.0, total), jnp.where(done, 0.0, steps),
+            jnp.where(done, runner.pending_replayed, replayed), jnp.where(done, 0.0, total), jnp.where(done, 0.0, steps),
             on_pending | done, pending_sum + jnp.where(again, score, 0.0), pending_count + again,
         )  # fmt: skip
         return carry, ended
 
     zero = jnp.zeros(runner.slot.shape, jnp.float32)
     already = jnp.all(runner.z == runner.pending_z, axis=-1)  # an env given no new world plays its pending one now
-    start = (runner.z, runner.slot, runner.potential, runner.potential_steps, already, zero, zero)
+    start = (runner.z, runner.slot, runner.replayed, runner.potential, runner.potential_steps, already, zero, zero)
     carry, (zs, slots, scores, valid, weights) = jax.lax.scan(one_step, start, (potential, trajectory.done, trajectory.metrics))
-    z, slot, total, steps, _, pending_sum, pending_count = carry
+    z, slot, replayed, total, steps, _, pending_sum, pending_count = carry
     # one entry per env for the episodes its pending world ended within the segment (their mean score),
     # so that a world replayed several times in a segment (short episodes) never enters the buffer twice
     flat = lambda x, last: jnp.concatenate([x.reshape(-1, *x.shape[2:]), last])  # noqa: E731
@@ -259,7 +267,9 @@ def score_segment(distribution, runner: EnvRunner, trajectory: Trajectory, targe
     )  # fmt: skip
     slot = curriculum.slot_of(state, z, slot)
     pending_slot = curriculum.slot_of(state, runner.pending_z, runner.pending_slot)  # a pending world kept for later segments too
-    return runner.replace(curriculum=state, z=z, slot=slot, pending_slot=pending_slot, potential=total, potential_steps=steps), weights
+    return runner.replace(
+        curriculum=state, z=z, slot=slot, replayed=replayed, pending_slot=pending_slot, potential=total, potential_steps=steps
+    ), weights
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float) -> tuple[jax.Array, jax.Array]:

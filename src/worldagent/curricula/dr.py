@@ -46,8 +46,8 @@ class DomainRandomisation:
     def slot_of(self, state: tuple, z, slot):
         return slot
 
-    def learns_from(self, slot: jax.Array) -> jax.Array:
-        return jnp.ones(slot.shape, jnp.float32)
+    def learns_from(self, replayed: jax.Array) -> jax.Array:
+        return jnp.ones(replayed.shape, jnp.float32)
 
 
 def build(worlds: Any, settings: dict, target=None):

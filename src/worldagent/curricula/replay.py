@@ -148,9 +148,9 @@ class ReplayCurriculum:
         """i32[B]: the buffer slot of each world in play (``buffer.locate``)."""
         return buffer_lib.locate(state.buffer, z, slot)
 
-    def learns_from(self, slot: jax.Array) -> jax.Array:
-        """f32[...]: 1 where the learner's gradient may use a step on the world from ``slot``, else 0."""
-        return (slot >= 0).astype(jnp.float32) if self.settings.robust else jnp.ones(slot.shape, jnp.float32)
+    def learns_from(self, replayed: jax.Array) -> jax.Array:
+        """f32[...]: 1 where the learner's gradient may use a step (robust PLR: only on worlds drawn by replay), else 0."""
+        return replayed.astype(jnp.float32) if self.settings.robust else jnp.ones(replayed.shape, jnp.float32)
 
     def episode_score(self, potential: jax.Array, metrics: dict) -> jax.Array:
         """An ended episode's score: its target margin, or its mean learning potential."""

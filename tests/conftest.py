@@ -66,6 +66,18 @@ def pytest_cmdline_main(config):
         config.option.dist = "loadgroup"
 
 
+# Workers parse the command line afresh, so a --dist set above never reaches them, and without it
+# they do not tag tests with their group: the controller then scatters a file's tests. Tell them.
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    node.workerinput["worldagent_loadgroup"] = node.config.option.dist == "loadgroup"
+
+
+def pytest_configure(config):
+    if getattr(config, "workerinput", {}).get("worldagent_loadgroup"):
+        config.option.loadgroup = True
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
 def pytest_collection_modifyitems(config, items):
     """Put each test file, or each folder of SHARED_FIXTURE_FOLDERS, on one xdist worker."""

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+import types
+import typing
+from typing import Any, ClassVar
 
 from worldagent.errors import WorldagentError
 
@@ -48,3 +50,37 @@ class JsonConfig:
         if unknown:
             raise WorldagentError(f"{type(self).__name__} has no field {unknown[0]!r}; its fields: {', '.join(sorted(known))}.")
         return dataclasses.replace(self, **changes)
+
+
+# -- config fields from ``NAME=VALUE`` texts (``--set``, ``--curriculum-set``) ----------------------
+
+_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+
+
+def describe_field(hint: Any) -> str:
+    """How to write a value of type ``hint``, for error messages."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if type(None) in typing.get_args(hint):
+        return f"{describe_field(args[0])} or none"
+    if typing.get_origin(hint) is tuple:
+        return f"comma-separated {describe_field(args[0]).removeprefix('an ').removeprefix('a ')}s, e.g. 64,64"
+    return {bool: "true or false", int: "an integer", float: "a number", str: "text"}.get(hint, str(hint))
+
+
+def parse_field(text: str, hint: Any) -> Any:
+    """``text`` as a value of type ``hint`` (bool, int, float, str, tuples of those, optional ones); ValueError if it is not."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return None if text.lower() in ("none", "null") else parse_field(text, args[0])
+    if typing.get_origin(hint) is tuple:
+        parts = [part.strip() for part in text.strip().strip("()[]").split(",")]
+        if not all(parts):
+            raise ValueError(text)
+        return tuple(parse_field(part, args[0]) for part in parts)
+    if hint is bool:
+        if text.lower() not in _TRUE + _FALSE:
+            raise ValueError(text)
+        return text.lower() in _TRUE
+    if hint in (int, float, str):
+        return hint(text)
+    raise ValueError(f"no parser for {hint}")

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import numpy as np
 import pytest
 
+from small_harvest import small_harvest
 from toy_env import registered
 from worldagent.agents import training
 from worldagent.agents.acktr import ACKTRConfig
@@ -15,8 +14,6 @@ from worldagent.agents.distributions import WorldPool, world_distribution
 from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.many import ManyRun, default_max_together, pad_pool, train_many
 from worldagent.agents.ppo import PPOConfig
-from worldagent.envs import registry
-from worldagent.envs.harvest.env import Harvest, make_params
 from worldagent.envs.harvest.world import HarvestMap
 from worldagent.errors import WorldagentError
 
@@ -41,22 +38,12 @@ TINY_MAPS = [
 @pytest.fixture(scope="module")
 def envs():
     """The toy gridworld (PPO, ACKTR) and a small harvest (DQN: 9x9 window, 20-step episodes), with their pools."""
-    small = dataclasses.replace(
-        registry.get("harvest"),
-        name="many_harvest",
-        make=lambda options: (Harvest(view_size=9, view_behind=2), make_params(max_steps=20)),
-        options=(),
-    )
-    with registered() as toy:
-        registry.register(small)
-        try:
-            pools = {
-                "toy": world_distribution(toy, "generator", size=8, seed=0),
-                "many_harvest": WorldPool.create(_stacked([HarvestMap.from_str(text) for text in TINY_MAPS])),
-            }
-            yield {"ppo": toy, "acktr": toy, "dqn": small}, pools
-        finally:
-            registry.unregister("many_harvest")
+    with registered() as toy, small_harvest("many_harvest") as small:
+        pools = {
+            "toy": world_distribution(toy, "generator", size=8, seed=0),
+            "many_harvest": WorldPool.create(_stacked([HarvestMap.from_str(text) for text in TINY_MAPS])),
+        }
+        yield {"ppo": toy, "acktr": toy, "dqn": small}, pools
 
 
 def _stacked(worlds: list) -> object:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from flax import struct
 
+from small_harvest import small_harvest
 from toy_env import registered
 from worldagent.agents import training
 from worldagent.agents.distributions import LatentWorlds, world_distribution
@@ -131,7 +132,8 @@ def test_target_margins_rank_worlds_by_the_event():
         (lambda: Settings(replay_prob=1.5), "replay_prob=1.5 is outside [0, 1]"),
         (lambda: Settings(buffer_size=0), "buffer_size=0; it must be at least 1"),
         (lambda: parse_curriculum_settings(["buffer=3"]), "NAME one of buffer_size"),
-        (lambda: parse_curriculum_settings(["buffer_size=big"]), "expected an integer"),
+        (lambda: parse_curriculum_settings(["buffer_size=big"]), "buffer_size takes an integer"),
+        (lambda: parse_curriculum_settings(["robust=maybe"]), "robust takes true or false"),
         (lambda: target_score("racing", "bogus > 1"), "unknown racing metric 'bogus'"),
         (lambda: target_score("racing", "normalised_return > 0.5"), "not during training"),
         (lambda: check_request("plr", {}, worlds_have_latents=False), "--worlds vae --generator DIR"),
@@ -191,42 +193,28 @@ def test_every_algorithm_trains_on_a_curriculum_and_resumes_it_identically(algo,
     """ACKTR (n-step targets) on the toy env; DQN (|TD error| and a target) on a tiny harvest."""
     from worldagent.agents.acktr import ACKTRConfig
     from worldagent.agents.dqn import DQNConfig
-    from worldagent.envs import registry
-    from worldagent.envs.harvest.env import Harvest, make_params
 
-    small = dataclasses.replace(
-        registry.get("harvest"),
-        name="curriculum_harvest",
-        make=lambda options: (Harvest(view_size=9, view_behind=2), make_params(max_steps=20)),
-        options=(),
-    )
-    with registered() as toy:
-        registry.register(small)
-        try:
-            spec = toy if algo == "acktr" else small
-            pool = world_distribution(spec, "generator", size=8, seed=0)
-            worlds = LatentWorlds(FakeGenerator(pool.worlds))
-            if algo == "acktr":
-                config, chunk = ACKTRConfig(total_episodes=48, num_envs=8, num_steps=8, hidden=(16,), inverse_every=2), 4
-                curriculum = make_curriculum("plr", worlds, {"buffer_size": 16, "min_fill": 0.25})
-            else:
-                config = DQNConfig(num_episodes=24, num_envs=4, hidden_sizes=(16,), batch_size=16, buffer_size=400, learning_starts=40)
-                chunk = 1
-                curriculum = make_curriculum(
-                    "target", worlds, {"buffer_size": 8, "min_fill": 0.25}, target_score("harvest", "group_reward", maximize=True)
-                )
-            run = lambda where, **kw: training.train(
-                spec, algo, config, curriculum, tmp_path / where, seed=1, progress=False, chunk_updates=chunk, **kw
-            )  # noqa: E731
-            run("whole")
-            run("killed", stop_after_chunks=2)
-            run("killed")
-            finals = [load_snapshots(tmp_path / where)[-1] for where in ("whole", "killed")]
-            assert len(finals[0]["score"]) >= 2 and np.isfinite(finals[0]["score"]).all()
-            for name in ("z", "score", "count", "age"):
-                np.testing.assert_array_equal(finals[0][name], finals[1][name])
-        finally:
-            registry.unregister("curriculum_harvest")
+    with registered() as toy, small_harvest("curriculum_harvest") as small:
+        spec = toy if algo == "acktr" else small
+        pool = world_distribution(spec, "generator", size=8, seed=0)
+        worlds = LatentWorlds(FakeGenerator(pool.worlds))
+        if algo == "acktr":
+            config, chunk = ACKTRConfig(total_episodes=48, num_envs=8, num_steps=8, hidden=(16,), inverse_every=2), 4
+            curriculum = make_curriculum("plr", worlds, {"buffer_size": 16, "min_fill": 0.25})
+        else:
+            config = DQNConfig(num_episodes=24, num_envs=4, hidden_sizes=(16,), batch_size=16, buffer_size=400, learning_starts=40)
+            chunk = 1
+            curriculum = make_curriculum(
+                "target", worlds, {"buffer_size": 8, "min_fill": 0.25}, target_score("harvest", "group_reward", maximize=True)
+            )
+        run = lambda where, **kw: training.train(spec, algo, config, curriculum, tmp_path / where, seed=1, progress=False, chunk_updates=chunk, **kw)  # noqa: E731
+        run("whole")
+        run("killed", stop_after_chunks=2)
+        run("killed")
+        finals = [load_snapshots(tmp_path / where)[-1] for where in ("whole", "killed")]
+        assert len(finals[0]["score"]) >= 2 and np.isfinite(finals[0]["score"]).all()
+        for name in ("z", "score", "count", "age"):
+            np.testing.assert_array_equal(finals[0][name], finals[1][name])
 
 
 @pytest.mark.slow

@@ -12,13 +12,13 @@ A config is the algorithm's defaults (its papers'), then the env's departures
 from __future__ import annotations
 
 import dataclasses
-import types
 import typing
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from worldagent.agents import acktr, dqn, ppo
+from worldagent.configs import describe_field, parse_field
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 
@@ -91,37 +91,6 @@ def training_config(
 
 # -- ``--set NAME=VALUE``: config fields from the command line -------------------------------------
 
-_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
-
-
-def _expected(hint: Any) -> str:
-    """How to write a value of type ``hint``, for error messages."""
-    args = [a for a in typing.get_args(hint) if a is not type(None)]
-    if type(None) in typing.get_args(hint):
-        return f"{_expected(args[0])} or none"
-    if typing.get_origin(hint) is tuple:
-        return f"comma-separated {_expected(args[0]).removeprefix('an ').removeprefix('a ')}s, e.g. 64,64"
-    return {bool: "true or false", int: "an integer", float: "a number", str: "text"}.get(hint, str(hint))
-
-
-def _parse_value(text: str, hint: Any) -> Any:
-    """``text`` as a value of type ``hint`` (bool, int, float, str, tuples of those, optional ones); ValueError if it is not."""
-    args = [a for a in typing.get_args(hint) if a is not type(None)]
-    if typing.get_origin(hint) in (typing.Union, types.UnionType):
-        return None if text.lower() in ("none", "null") else _parse_value(text, args[0])
-    if typing.get_origin(hint) is tuple:
-        parts = [part.strip() for part in text.strip().strip("()[]").split(",")]
-        if not all(parts):
-            raise ValueError(text)
-        return tuple(_parse_value(part, args[0]) for part in parts)
-    if hint is bool:
-        if text.lower() not in _TRUE + _FALSE:
-            raise ValueError(text)
-        return text.lower() in _TRUE
-    if hint in (int, float, str):
-        return hint(text)
-    raise ValueError(f"no parser for {hint}")
-
 
 def parse_settings(texts: Iterable[str], algos: Iterable[str]) -> dict[str, dict[str, Any]]:
     """Config fields from ``NAME=VALUE`` texts (the CLI's ``--set``), each parsed to its field's type.
@@ -155,7 +124,7 @@ def parse_settings(texts: Iterable[str], algos: Iterable[str]) -> dict[str, dict
         for algo in having:
             hint = hints[algo][field_name]
             try:
-                settings[algo][field_name] = _parse_value(value.strip(), hint)
+                settings[algo][field_name] = parse_field(value.strip(), hint)
             except ValueError:
-                raise WorldagentError(f"--set {text!r}: {algo} {field_name} takes {_expected(hint)}.") from None
+                raise WorldagentError(f"--set {text!r}: {algo} {field_name} takes {describe_field(hint)}.") from None
     return settings

@@ -114,7 +114,7 @@ def init_runner(key: jax.Array, env, env_params, distribution, num_envs: int) ->
     """B envs reset onto B worlds drawn from ``distribution`` (a curriculum or a fixed distribution)."""
     curriculum = as_curriculum(distribution)
     key_worlds, key_reset = jax.random.split(key)
-    state = curriculum.init(key_worlds)
+    state = curriculum.init(jax.random.fold_in(key_worlds, 1))  # its own stream; sample keeps key_worlds (dr as before)
     draw = curriculum.sample(state, key_worlds, num_envs)
     obs, env_state = jax.vmap(env.reset, in_axes=(0, 0, None))(jax.random.split(key_reset, num_envs), draw.worlds, env_params)
     zeros = jnp.zeros(num_envs, jnp.float32)

@@ -19,9 +19,11 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import pkgutil
+import typing
 from functools import cache
 from typing import Any
 
+from worldagent.configs import describe_field, parse_field
 from worldagent.errors import WorldagentError
 
 DEFAULT = "dr"
@@ -96,23 +98,15 @@ def parse_curriculum_settings(texts: list[str] | tuple[str, ...]) -> dict[str, A
     """``["buffer_size=1000", "replay_prob=0.8"]`` -> {field: typed value} of ``replay.Settings``; bad ones refused in one line."""
     from worldagent.curricula.replay import Settings
 
-    types = {f.name: type(f.default) for f in dataclasses.fields(Settings)}
+    hints = typing.get_type_hints(Settings)
     parsed: dict[str, Any] = {}
     for text in texts:
         name, sep, value = text.partition("=")
         name = name.strip()
-        if not sep or name not in types:
-            raise WorldagentError(f"--curriculum-set {text!r}: write NAME=VALUE with NAME one of {', '.join(types)}.")
-        parsed[name] = _typed(name, value.strip(), types[name])
+        if not sep or name not in hints:
+            raise WorldagentError(f"--curriculum-set {text!r}: write NAME=VALUE with NAME one of {', '.join(hints)}.")
+        try:
+            parsed[name] = parse_field(value.strip(), hints[name])
+        except ValueError:
+            raise WorldagentError(f"--curriculum-set {text!r}: {name} takes {describe_field(hints[name])}.") from None
     return parsed
-
-
-def _typed(name: str, value: str, kind: type) -> Any:
-    if kind is bool:
-        if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
-            raise WorldagentError(f"--curriculum-set {name}={value!r}: expected true or false.")
-        return value.lower() in ("true", "1", "yes")
-    try:
-        return kind(value)
-    except ValueError:
-        raise WorldagentError(f"--curriculum-set {name}={value!r}: expected {'an integer' if kind is int else 'a number'}.") from None

@@ -10,14 +10,13 @@ from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
     GENERATOR_HELP,
-    backend,
     backend_flag,
     check_counts,
     check_metric,
     check_run_dir,
     check_seed,
+    command_setup,
     env_argument,
-    given_options,
     metric_help,
     option_flag,
     ray_address_flag,
@@ -78,14 +77,8 @@ def register(app: typer.Typer) -> None:
 
         names = [n.strip() for n in descriptors.split(",")] if descriptors else None
         check_atlas_request(env, objective, budget, names, cells, failure, repeats, seed, out)
-        setup = experiments.setup(
-            env,
-            agent,
-            generator,
-            options=given_options(env, option),
-            stochastic=stochastic,
-            repeats=repeats,
-            backend=backend(backend_name, ray_address),
+        setup = command_setup(
+            env, agent, generator, option, stochastic=stochastic, repeats=repeats, backend_name=backend_name, ray_address=ray_address
         )
         with RunStore(out) as store:
             found = experiments.atlas(

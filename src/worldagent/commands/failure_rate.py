@@ -12,13 +12,12 @@ from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
     GENERATOR_HELP,
-    backend,
     backend_flag,
     check_counts,
     check_run_dir,
     check_seed,
+    command_setup,
     env_argument,
-    given_options,
     option_flag,
     ray_address_flag,
     stochastic_flag,
@@ -120,15 +119,8 @@ def register(app: typer.Typer) -> None:
         check_budget(worlds, width, importance)
         parse_selection(event, env)  # a bad event fails before the agent and generator load
         check_run_dir(out)
-        setup = experiments.setup(
-            env,
-            agent,
-            generator,
-            options=given_options(env, option),
-            greedy=greedy,
-            stochastic=stochastic,
-            repeats=repeats,
-            backend=backend(backend_name, ray_address),
+        setup = command_setup(
+            env, agent, generator, option, greedy=greedy, stochastic=stochastic, repeats=repeats, backend_name=backend_name, ray_address=ray_address
         )
         with RunStore(out) as store:
             say = lambda line: console.print(line, markup=False, highlight=False)  # noqa: E731

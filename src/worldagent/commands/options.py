@@ -79,6 +79,24 @@ def backend(name: str, address: str | None):
     return make_backend(name, address)
 
 
+def command_setup(
+    env: str, agent: str, generator, option: list[str], *, stochastic: bool, repeats: int, backend_name: str, ray_address, greedy: bool = False
+):
+    """``experiments.setup`` of a command's agent, generator, ``--option``, ``--backend`` and ``--ray-address``."""
+    from worldagent import experiments
+
+    return experiments.setup(
+        env,
+        agent,
+        generator,
+        options=given_options(env, option),
+        greedy=greedy,
+        stochastic=stochastic,
+        repeats=repeats,
+        backend=backend(backend_name, ray_address),
+    )
+
+
 def env_options(env: str, texts: list[str]) -> dict:
     """The options of ``env`` parsed from ``--option`` texts (checked, defaults filled in)."""
     return registry.get(env).parse_options(list(texts))

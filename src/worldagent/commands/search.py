@@ -10,15 +10,14 @@ from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
     GENERATOR_HELP,
-    backend,
     backend_flag,
     check_counts,
     check_metric,
     check_optimiser,
     check_run_dir,
     check_seed,
+    command_setup,
     env_argument,
-    given_options,
     metric_help,
     option_flag,
     ray_address_flag,
@@ -62,15 +61,8 @@ def register(app: typer.Typer) -> None:
         check_metric(env, objective)
         check_optimiser(optimiser)
         check_run_dir(out)
-        setup = experiments.setup(
-            env,
-            agent,
-            generator,
-            options=given_options(env, option),
-            greedy=greedy,
-            stochastic=stochastic,
-            repeats=repeats,
-            backend=backend(backend_name, ray_address),
+        setup = command_setup(
+            env, agent, generator, option, greedy=greedy, stochastic=stochastic, repeats=repeats, backend_name=backend_name, ray_address=ray_address
         )
         with RunStore(out) as store:
             evaluations, spec = experiments.search(

@@ -47,6 +47,7 @@ from worldagent.envs import registry  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.events import parse_selection  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
+from worldagent.influence.experiment import compared_metrics  # noqa: E402
 from worldagent.influence.statistics import mean_and_ci  # noqa: E402
 from worldagent.search.objectives import generate  # noqa: E402
 
@@ -54,7 +55,6 @@ EVAL_SEED = 20_251_126  # the evaluation worlds' own stream, apart from every tr
 ALPHA = 0.10
 STATS = ("mean", "cvar10", "p_failure", "worst")
 NOT_RUN = {
-    "offline influence arm": "the paper's offline influence at the same total episode budget (search + retrain) is not an arm yet",
     "rounds arm": "`influence --rounds 3` is not an arm yet",
     "atlas worst world": "the worst world is the worst of the evaluation worlds (a random search), not a fixed-budget atlas per agent",
 }
@@ -77,6 +77,36 @@ def train_arm(spec, algo, config, options, curriculum, seeds, work: Path, progre
     results = train_many(spec, algo, config, runs, options=options, progress=progress)
     wall = time.perf_counter() - start
     return {"dirs": [str(r.out_dir) for r in results], "wall_seconds": round(wall, 1), "episodes": [r.episodes for r in results]}
+
+
+def offline_arm(
+    spec, algo, config, options, generator, generator_dir: Path, policy_dir: str, seeds, work: Path, counts: dict, progress: bool
+) -> dict:
+    """The paper's influence (§6.2), offline: the first seed's ``dr`` agent plays ``counts["candidates"]``
+    random worlds and a CMA-ES search of ``counts["search_budget"]`` more (8 episodes each); the worlds
+    with the env's selection become the pool every seed's agent trains on from scratch."""
+    from worldagent.agents.distributions import WorldPool
+    from worldagent.influence.experiment import find_worlds
+    from worldagent.influence.worlds import resolved
+    from worldagent.store import RunStore
+
+    selection = resolved(spec.selection, spec)
+    setup = experiments.setup(spec.name, policy_dir, str(generator_dir), repeats=counts["repeats"])
+    work.mkdir(parents=True, exist_ok=True)
+    clock = time.perf_counter()
+    with RunStore(work) as store:
+        tried, _, worlds, latents, _, _ = find_worlds(store, spec, setup.env, setup.params, setup.policy, generator, selection, counts, progress)
+    search_wall = time.perf_counter() - clock
+    if len(latents) == 0:
+        raise SystemExit(f"offline arm: none of {len(tried)} worlds has {selection.describe()}; raise --offline-search.")
+    trained = train_arm(spec, algo, config, options, WorldPool.create(worlds), seeds, work, progress)
+    return {
+        **trained,
+        "curriculum": f"pool of {len(latents)} worlds with {selection.describe()} (of {len(tried)} tried by the s{seeds[0]} dr agent)",
+        "search_wall_seconds": round(search_wall, 1),
+        "search_episodes": len(tried) * counts["repeats"],
+        "training_episodes_before": "the selecting dr agent's training (the dr arm's first seed)",
+    }
 
 
 def evaluation_worlds(generator, count: int):
@@ -115,13 +145,15 @@ def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
         "p_failure_interval": [low, high],
         "worst": float(worst_first[0]),
         "failing_worlds": k,
+        **{f"mean_{name}": float(metrics[name].mean()) for name in compared_metrics(spec)},
     }
 
 
 def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
     """{stat: {arm: mean_and_ci over seeds, + overlaps_dr}}."""
     out: dict = {}
-    for stat in STATS:
+    first = next(iter(next(iter(per_seed.values())).values()))
+    for stat in (*STATS, *(name for name in first if name.startswith("mean_"))):
         out[stat] = {arm: mean_and_ci([values[stat] for values in seeds.values()]) for arm, seeds in per_seed.items()}
         base = out[stat].get("dr")
         for arm, summary in out[stat].items():
@@ -138,7 +170,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--option", action="append", default=None, help="env option NAME=VALUE (default: the paper preset's)")
     parser.add_argument("--episodes", type=int, default=None, help="training episodes per run (default: the paper preset's)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    parser.add_argument("--arms", nargs="+", default=["dr", "plr", "accel", "target"])
+    parser.add_argument(
+        "--arms", nargs="+", default=["dr", "plr", "accel", "target"], help="curricula, and 'offline' (the paper's influence; needs dr)"
+    )
+    parser.add_argument("--offline-search", type=int, nargs=2, default=(1000, 525), metavar=("CANDIDATES", "SEARCH"), help="the offline arm's worlds")
     parser.add_argument("--target", default=None, help="the target arm's target (default: the env's failure event)")
     parser.add_argument("--maximize", dest="maximize", action="store_true", default=None)
     parser.add_argument("--minimize", dest="maximize", action="store_false")
@@ -166,16 +201,27 @@ def main(argv=None) -> dict:
     settings = parse_curriculum_settings(args.curriculum_set)
 
     arms, per_seed = {}, {}
+    if "offline" in args.arms and ("dr" not in args.arms or args.arms.index("offline") < args.arms.index("dr")):
+        raise SystemExit("--arms: the offline arm selects its worlds with dr's first agent; list dr before offline.")
     for arm in args.arms:
-        target = target_score(spec, target_text, args.maximize) if arm == "target" else None
-        curriculum = make_curriculum(arm, latents, settings if arm != "dr" else {}, target)
-        trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
-        arms[arm] = {"curriculum": label(curriculum), **trained}
+        if arm == "offline":
+            counts = {"candidates": args.offline_search[0], "search_budget": args.offline_search[1], "repeats": args.repeats, "seed": 0}
+            arms[arm] = offline_arm(
+                spec, algo, config, options, generator, generator_dir, arms["dr"]["dirs"][0], args.seeds, work / arm, counts, not args.quiet
+            )
+        else:
+            target = target_score(spec, target_text, args.maximize) if arm == "target" else None
+            curriculum = make_curriculum(arm, latents, settings if arm != "dr" else {}, target)
+            trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
+            arms[arm] = {"curriculum": label(curriculum), **trained}
+        trained = arms[arm]
+        clock = time.perf_counter()
         per_seed[arm] = {}
         for seed, agent_dir in zip(args.seeds, trained["dirs"]):
             metrics = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz")
             per_seed[arm][seed] = agent_statistics(spec, metrics, params)
             print(arm, seed, {k: round(v, 4) if isinstance(v, float) else v for k, v in per_seed[arm][seed].items()}, flush=True)
+        arms[arm]["evaluation_wall_seconds"] = round(time.perf_counter() - clock, 1)
 
     result = {
         "env": spec.name,

@@ -16,7 +16,7 @@ from worldagent.agents import training
 from worldagent.agents.distributions import LatentWorlds, world_distribution
 from worldagent.agents.ppo import PPOConfig
 from worldagent.curricula import buffer as buffer_lib
-from worldagent.curricula import check_request, make_curriculum, parse_curriculum_settings
+from worldagent.curricula import check_request, late_replay_warning, make_curriculum, parse_curriculum_settings
 from worldagent.curricula.replay import Settings
 from worldagent.curricula.scores import target_score
 from worldagent.curricula.snapshots import load_snapshots
@@ -105,6 +105,16 @@ def test_nothing_is_replayed_before_the_buffer_is_filled_enough(toy):
     three = buffer_with([0.1, 0.2, 0.3], dim=3, size=8)
     draw = curriculum.sample(curriculum.init(jax.random.key(0)).replace(buffer=three), jax.random.key(2), 64)
     assert (np.asarray(draw.slot) == -1).all()
+
+
+def test_a_buffer_too_large_for_the_budget_is_named_with_one_that_fits(toy):
+    _, worlds = toy
+    papers = make_curriculum("plr", worlds, {})  # 4,000 latents, replay from 2,000
+    assert "never replays" in late_replay_warning(papers, 2000) and "buffer_size=400" in late_replay_warning(papers, 2000)
+    assert "only after ~2,000 of its 5,000" in late_replay_warning(papers, 5000)
+    assert late_replay_warning(papers, 10_000) is None
+    assert late_replay_warning(make_curriculum("plr", worlds, {"buffer_size": 400}), 2000) is None
+    assert late_replay_warning(make_curriculum("dr", worlds), 10) is None
 
 
 def test_edits_are_small_finite_steps_from_buffer_latents(toy):

@@ -50,7 +50,7 @@ def register(app: typer.Typer) -> None:
             [],
             "--curriculum-set",
             help="A curriculum setting NAME=VALUE (repeatable): buffer_size, replay_prob, temperature, staleness, "
-            "min_fill, edit_prob, mutation_scale, window; defaults in docs/curriculum.md.",
+            "min_fill, edit_prob, mutation_scale, window, robust; defaults in docs/curriculum.md.",
         ),  # fmt: skip
         option: list[str] = option_flag(),
         settings: list[str] = set_flag(),
@@ -62,7 +62,7 @@ def register(app: typer.Typer) -> None:
         from worldagent.agents.algorithms import parse_settings, training_config
         from worldagent.agents.distributions import world_distribution
         from worldagent.agents.training import train as run_training
-        from worldagent.curricula import check_request, label, make_curriculum, parse_curriculum_settings
+        from worldagent.curricula import check_request, label, late_replay_warning, make_curriculum, parse_curriculum_settings
         from worldagent.curricula.scores import target_score
         from worldagent.envs import registry
 
@@ -82,6 +82,9 @@ def register(app: typer.Typer) -> None:
         check_request(curriculum, settings, worlds == "vae" or (Path(worlds) / "generator.json").is_file())
         distribution = world_distribution(spec, worlds, generator_dir=generator, progress=not quiet)
         schedule = make_curriculum(curriculum, distribution, settings, scoring)
+        late = late_replay_warning(schedule, config.episodes)
+        if late:
+            console.print(f"[yellow]{late}[/yellow]")
         result = run_training(
             spec, algo, config, schedule, out, seed=seed, options=options, progress=not quiet, resume=resume,
             distribution_spec=worlds if curriculum == "dr" else f"{worlds}; curriculum {label(schedule)}",

@@ -23,6 +23,8 @@ import typing
 from functools import cache
 from typing import Any
 
+import numpy as np
+
 from worldagent.configs import describe_field, parse_field
 from worldagent.errors import WorldagentError
 
@@ -78,6 +80,31 @@ def label(curriculum: Any) -> str:
     changed = {f.name: getattr(curriculum.settings, f.name) for f in dataclasses.fields(Settings)}
     target = f" target={curriculum.target.text!r}" if curriculum.target is not None else ""
     return f"{curriculum.name} " + " ".join(f"{k}={v}" for k, v in changed.items()) + target
+
+
+LATE_REPLAY = 0.25  # share of a run's episodes after which a buffer still filling is worth a warning
+
+
+def late_replay_warning(curriculum: Any, episodes: int) -> str | None:
+    """One line when a replay curriculum cannot start replaying in the first quarter of ``episodes``.
+
+    Replay waits until ``min_fill`` of the buffer holds distinct worlds, about one per episode:
+    the papers' 4,000 latents suit their budgets, not a run of a few thousand episodes, where
+    the curriculum would stay ``dr`` for most or all of training. Suggests a buffer that starts
+    replay a tenth of the way in.
+    """
+    settings = getattr(curriculum, "settings", None)
+    if not getattr(curriculum, "adaptive", False) or settings is None or settings.replay_prob == 0:
+        return None
+    needed = int(np.ceil(settings.min_fill * settings.buffer_size))
+    if needed <= LATE_REPLAY * episodes:
+        return None
+    suggested = max(1, int(0.1 * episodes / max(settings.min_fill, 1e-9)))
+    when = "never replays" if needed >= episodes else f"replays only after ~{needed:,} of its {episodes:,} episodes"
+    return (
+        f"curriculum {curriculum.name}: a buffer of {settings.buffer_size:,} with min_fill {settings.min_fill} {when}; "
+        f"for this budget pass --curriculum-set buffer_size={suggested}."
+    )
 
 
 def is_robust(distribution: Any) -> bool:

@@ -44,7 +44,7 @@ keys = jax.random.split(jax.random.key(3), (42, 8))
 out = {}
 for name, policy in policies.items():
     for size in (42,) if sys.argv[2] == "sharded" else (42, 7, 1):  # two devices: compared with one device's 42
-        count = 7 if name == "host" and size == 1 else 42  # a host step is a Python call: 7 worlds one by one suffice
+        count = 7 if size == 1 else 42  # 7 worlds one by one suffice (each call pads to a full batch of episodes)
         parts = [
             evaluate(env, policy, jax.tree_util.tree_map(lambda leaf: leaf[s : s + size], worlds), 8, None, params, keys=keys[s : s + size])["return"]
             for s in range(0, count, size)

@@ -6,10 +6,11 @@ and outputs; ``reproduce/manifest.py`` writes it) and, per environment, what its
     <run>/<env>/
         dataset.npz            the procedurally generated worlds (paper §5.2.1)
         generator/             the VAE and G(z) (quality.json: its quality figures)
-        agent/                 the training run (checkpoint, curve.csv/png, the saved agent in policy/)
+        agent/                 the training run (checkpoint, curve.csv/png, the saved agent in policy/; with an
+                               adaptive curriculum its buffer snapshots in curriculum/ and curriculum.png)
         store.sqlite           random / strategic (min, max) / comparison / atlas / failure-rate campaigns
         influence/             the influencing experiment (influence.json, its agents)
-        figures/               figures drawn by phases (strategic.png, comparison.png, influence.png, atlas.png, ...)
+        figures/               figures drawn by phases and the report (strategic.png, ..., curriculum.png)
 
 ``RunLayout`` says where each of those lives; ``Run`` reads them: the manifest, each phase's
 record, the store's evaluations and worlds, the generator and the agent. It sits below
@@ -92,7 +93,7 @@ class RunLayout:
         return {
             "dataset": [self.dataset_path],
             "generator": [self.generator_dir, self.figure("generator_traversals")],
-            "agent": [self.agent_dir],
+            "agent": [self.agent_dir, self.figure("curriculum")],
             "strategic": [self.figure("strategic")],
             "compare": [self.figure("comparison")],
             "influence": [self.influence_dir, self.figure("influence")],
@@ -214,6 +215,21 @@ class Run:
     def influence(self, env: str) -> dict | None:
         """``influence.json`` of a finished influence phase."""
         return read_json(self.layout(env).influence_result) if self.done(env, "influence") else None
+
+    def curriculum(self, env: str) -> dict | None:
+        """What the agent phase's curriculum was and did, None before that phase finished (and for parts):
+
+        - ``request``: its recorded config (``Preset.curriculum_of``: name, settings, target), None for ``dr``;
+        - ``label``: as the agent's ``run.json`` records it (``curricula.label``: ``"dr"``, or the name and every setting);
+        - ``snapshots``: the buffer at every checkpoint (``curricula.snapshots.load_snapshots``; [] for ``dr``).
+        """
+        if env in self.parts or not self.done(env, "agent"):
+            return None
+        from worldagent.curricula.snapshots import load_snapshots
+
+        request = self.phases(env)["agent"].get("config", {}).get("curriculum")
+        label = self.outputs(env, "agent").get("curriculum", "dr" if request is None else request["name"])  # runs before the field: dr
+        return {"request": request, "label": label, "snapshots": load_snapshots(self.layout(env).agent_dir)}
 
     def store_path(self, env: str) -> Path:
         return self.parts[env].store if env in self.parts else self.layout(env).store_path

@@ -8,8 +8,13 @@ import typer
 
 from worldagent.commands.console import console, friendly_errors, status_line
 from worldagent.commands.options import check_store, set_flag
+from worldagent.commands.train import curricula_help
 from worldagent.files import check_writable
 
+CURRICULUM_SET_HELP = (
+    "A curriculum setting NAME=VALUE (repeatable), as `worldagent train --curriculum-set` takes it: buffer_size, replay_prob, "
+    "temperature, staleness, min_fill, edit_prob, mutation_scale, window, robust; defaults in docs/curriculum.md."
+)
 REPRODUCE_SET_HELP = (
     "A training setting NAME=VALUE (repeatable): sets that field of the config of every env's algorithm that has it; "
     "ALGO.NAME=VALUE only for agents trained with ALGO, e.g. --set ppo.learning_rate=1e-3. Over the algorithm's defaults and the env's own "
@@ -63,23 +68,41 @@ def register(app: typer.Typer) -> None:
             help=f"Redo this phase (and what depends on it): {', '.join(PHASES)}. Repeatable.",
         ),
         settings: list[str] = set_flag(REPRODUCE_SET_HELP),
+        curriculum: str = typer.Option(
+            "dr",
+            "--curriculum",
+            help="Where each training episode's world comes from as every env's agent learns: dr trains on the dataset's worlds (the paper's way); "
+            "an adaptive curriculum draws latents of the run's G(z). " + curricula_help(),
+        ),
+        target: str = typer.Option(
+            None,
+            "--target",
+            help="Score worlds by this event (e.g. 'crash_rate > 0.5') or, with --maximize/--minimize, this metric; "
+            "--curriculum target without it: each env's failure event (`worldagent envs`).",
+        ),
+        maximize: bool = typer.Option(None, "--maximize/--minimize", help="With --target METRIC: train toward worlds where it is high / low."),
+        curriculum_settings: list[str] = typer.Option([], "--curriculum-set", metavar="NAME=VALUE", help=CURRICULUM_SET_HELP),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
     ) -> None:
         """Run the paper end to end: datasets, generators, agents, random and strategic evaluation, ES vs BO, influencing; then the HTML report."""
         from worldagent.agents.algorithms import parse_settings
+        from worldagent.curricula import parse_curriculum_settings
+        from worldagent.reproduce.pipeline import adaptive, resolve_envs, restart_closure
         from worldagent.reproduce.pipeline import reproduce as run
-        from worldagent.reproduce.pipeline import resolve_envs, restart_closure
         from worldagent.reproduce.presets import get_preset
 
         chosen = get_preset(preset).with_algo(algo)
         envs = resolve_envs(env, chosen)
         chosen = chosen.with_settings(parse_settings(settings, [chosen.algo_of(name) for name in envs]))
+        chosen = chosen.with_curriculum(curriculum, target, maximize, parse_curriculum_settings(curriculum_settings))
+        for name in envs:
+            chosen.check_curriculum(name)
         if show:
             typer.echo(chosen.show())
             return
         out = out or Path("runs") / chosen.name
-        check_reproduce_dir(out, envs, restart_closure(restart))
+        check_reproduce_dir(out, envs, restart_closure(restart, adaptive(chosen, envs)))
         manifest = run(chosen, out, envs, restart=restart, progress=not quiet, echo=status_line)
         failed = [key for key, entry in manifest.data["phases"].items() if entry.get("status") == "failed"]
         if failed:

@@ -5,6 +5,10 @@ held at each checkpoint) and how full it was. Middle: the last buffer's latents 
 projection (the two principal axes of the latents), coloured by score. Right: the worlds it
 favoured most at the end (highest replay probability), decoded by the generator and drawn as
 the environment draws worlds.
+
+``curriculum_section`` is the report's "Curriculum" section: per environment, what the agent
+phase's curriculum was (``runs.Run.curriculum``), this figure redrawn from the agent's
+snapshots, and the latents it favoured most; for ``dr`` one line on how to ask for one.
 """
 
 from __future__ import annotations
@@ -40,10 +44,14 @@ def principal_plane(z: np.ndarray) -> np.ndarray:
     return np.pad(plane, ((0, 0), (0, 2 - plane.shape[1])))
 
 
+def favourite_order(snapshot: dict, count: int) -> np.ndarray:
+    """int[k]: the buffer slots of the ``count`` highest scores in a snapshot (best first, earliest slot on ties)."""
+    return np.argsort(-np.asarray(snapshot["score"]), kind="stable")[:count]
+
+
 def favourite_latents(snapshot: dict, count: int) -> np.ndarray:
     """f32[k, D]: the ``count`` latents of highest score in a snapshot (best first)."""
-    order = np.argsort(-np.asarray(snapshot["score"]), kind="stable")[:count]
-    return np.asarray(snapshot["z"], np.float32)[order]
+    return np.asarray(snapshot["z"], np.float32)[favourite_order(snapshot, count)]
 
 
 def curriculum_figure(snapshots: list[dict], spec: Any, generator: Any, out: Path | str, count: int = 4, title: str = "") -> Path:
@@ -69,7 +77,7 @@ def curriculum_figure(snapshots: list[dict], spec: Any, generator: Any, out: Pat
 
     ax = figure.add_subplot(grid[0, 0])
     for name, style in (("median", "-"), ("p90", "--"), ("max", ":")):
-        ax.plot(trace["update"], trace[name], style, label=name)
+        ax.plot(trace["update"], trace[name], style, marker=".", label=name)  # a marker: a run of one snapshot shows too
     ax.set_xlabel("update")
     ax.set_ylabel("buffer score")
     ax.legend(fontsize=7, loc="best")
@@ -104,3 +112,87 @@ def curriculum_figure(snapshots: list[dict], spec: Any, generator: Any, out: Pat
         return write_atomically(out, save)
     finally:
         plt.close(figure)
+
+
+# -- the report's section -----------------------------------------------------------------------
+
+FAVOURITES = 4  # latents listed (and worlds drawn) per environment
+SHOWN_DIMENSIONS = 8  # latent coordinates written out per favoured latent
+
+
+def curriculum_section(run: Any, results: dict) -> str:
+    """The report's "Curriculum" section: one block per environment (see the module docstring)."""
+    from worldagent.reports.page import missing, phase_state
+
+    parts = []
+    for env, res in results.items():
+        state = phase_state(res["phases"]["agent"])
+        found = res.get("curriculum")
+        parts.append(f"<h3>{env}</h3>" + (state or (missing("no agent run") if found is None else _curriculum_block(run, env, res, found))))
+    return "".join(parts) or missing("not run")
+
+
+def _curriculum_block(run: Any, env: str, res: dict, found: dict) -> str:
+    from worldagent.envs import registry
+    from worldagent.reports.page import esc, image, missing
+
+    request = found["request"]
+    if request is None:
+        worlds = res["phases"]["dataset"].get("config", {}).get("worlds")
+        return (
+            f"<p data-curriculum='dr'>No curriculum: the agent trained with <code>dr</code> (domain randomisation), every episode's world drawn "
+            f"afresh from the dataset's {'' if worlds is None else f'{worlds:,} '}procedural worlds. To let a curriculum choose them from the run's "
+            "G(z) as the agent learns, run reproduce with <code>--curriculum plr</code> (or accel, target; docs/curriculum.md).</p>"
+        )
+    target, algo = request.get("target"), res["phases"]["agent"].get("config", {}).get("algo")
+    potential = "|TD error|" if algo == "dqn" else "positive value loss"
+    direction = {True: " (maximize)", False: " (minimize)"}.get(request.get("maximize"), "")
+    scored = f"learning potential ({potential})" if target is None else f"the margin of the target <code>{esc(target)}</code>{direction}"
+    text = (
+        f"<p data-curriculum='{esc(request['name'])}'>The agent trained with the curriculum <code>{esc(request['name'])}</code> over latents z of "
+        f"the run's G(z), each world scored by {scored}. As the agent's run.json records it: <code>{esc(found['label'])}</code>.</p>"
+    )
+    snapshots = found["snapshots"]
+    if not snapshots:
+        return text + missing("no buffer snapshot in the agent's run directory")
+    spec = registry.get(env)
+    generator = run.generator(env) if run.has_generator(env) else None
+    figure = curriculum_figure(snapshots, spec, generator, res["layout"].figure("curriculum"), count=FAVOURITES, title=f"{env}: {request['name']}")
+    caption = (
+        f"{env}: the buffer's scores over training ({len(snapshots)} snapshot{'s' if len(snapshots) != 1 else ''}), its latents at the end on their two principal axes, "
+        "and the worlds G(z) of the latents it favoured most"
+    )
+    return text + image(figure, caption) + favourites_table(env, snapshots[-1])
+
+
+def favourites_table(env: str, snapshot: dict) -> str:
+    """The last snapshot's highest-scoring latents: score, episodes, age and coordinates (rounded)."""
+    from worldagent.reports.page import fmt, missing, number, table
+
+    held = len(snapshot["score"])
+    if not held:
+        return missing(f"the buffer held no latent at update {int(snapshot['update']):,} (no episode had ended)")
+    order = favourite_order(snapshot, FAVOURITES)
+    rows = []
+    for rank, slot in enumerate(order, start=1):
+        z = np.asarray(snapshot["z"][slot], np.float64)
+        shown = " ".join(f"{v:.2f}" for v in z[:SHOWN_DIMENSIONS]) + (" …" if len(z) > SHOWN_DIMENSIONS else "")
+        rows.append(
+            [
+                f"<td>#{rank}</td>",
+                number(f"{env}.curriculum.favoured{rank}.score", float(snapshot["score"][slot])),
+                f"<td class='num'>{fmt(int(snapshot['count'][slot]))}</td>",
+                f"<td class='num'>{fmt(int(snapshot['age'][slot]))}</td>",
+                f"<td class='num'>{fmt(float(np.linalg.norm(z)), 3)}</td>",
+                f"<td><code>{shown}</code></td>",
+            ]
+        )
+    head = [
+        "favoured",
+        "score",
+        "episodes",
+        "episodes since last scored",
+        "|z|",
+        f"z (first {min(len(snapshot['z'][0]), SHOWN_DIMENSIONS)} dimensions)",
+    ]
+    return f"<h4>The latents it favoured most, of {held:,} held at update {int(snapshot['update']):,}</h4>" + table(head, rows, raw_cells=True)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from worldagent.envs import registry
 from worldagent.files import write_text
+from worldagent.reports.curriculum import curriculum_section
 from worldagent.reports.page import CSS, esc, fmt, image, missing, number, phase_state, section, table
 from worldagent.reports.provenance import overview
 from worldagent.reports.results import Headline, env_results, headlines
@@ -37,6 +38,7 @@ SECTIONS = (
     ("atlas", "Failure atlas (beyond the paper)"),
     ("generator", "Generator quality"),
     ("training", "Training curves"),
+    ("curriculum", "Curriculum"),
     ("provenance", "Provenance"),
 )
 
@@ -355,6 +357,7 @@ def build_report(run_dir: Path | str) -> Path:
         "provenance": overview(manifest, run_dir),
         "generator": generator_section(run_dir, results),
         "training": training_section(run_dir, results),
+        "curriculum": curriculum_section(run, results),
         "random": random_section(run_dir, results),
         "strategic": strategic_section(run_dir, results),
         "comparison": comparison_section(run_dir, results),

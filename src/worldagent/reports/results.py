@@ -86,7 +86,7 @@ def env_results(run: Run, env: str) -> dict:
             results.update(store_results(spec, store, done))
             if "campaign" in run.outputs(env, "atlas"):
                 results["atlas"] = atlas_results(spec, store, done["atlas"]["outputs"])
-    for name, found in (("influence", run.influence(env)), ("quality", run.quality(env))):
+    for name, found in (("influence", run.influence(env)), ("quality", run.quality(env)), ("curriculum", run.curriculum(env))):
         if found is not None:
             results[name] = found
     return results

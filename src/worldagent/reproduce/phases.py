@@ -182,22 +182,24 @@ def last_values(curve: dict, names) -> dict[str, float]:
 
 
 def agent_phase(ctx: EnvContext) -> dict:
-    """Train the agents on the procedural worlds of the dataset (resuming their checkpoint)."""
-    from worldagent.agents.distributions import world_distribution
+    """Train the agents (resuming their checkpoint): on the procedural worlds of the dataset (``dr``, the
+    default), or with the preset's adaptive curriculum over G(z) of the run's generator (``--curriculum``)."""
     from worldagent.agents.training import train
+    from worldagent.curricula import label
 
     layout, spec = ctx.layout, ctx.spec
+    distribution, described = training_worlds(ctx)
     result = train(
         spec,
         ctx.algo,
         ctx.train_config(ctx.budgets.episodes),
-        world_distribution(spec, str(layout.dataset_path)),
+        distribution,
         layout.agent_dir,
         seed=ctx.seed,
         options=ctx.options,
         progress=ctx.progress,
         resume=True,
-        distribution_spec=layout.rel(layout.dataset_path),
+        distribution_spec=described,
     )
     last = last_values(result.curve, (spec.metrics.main, *spec.metrics.highlighted))
     shown = ", ".join(f"{name} {value:.3g}" for name, value in last.items())
@@ -210,8 +212,32 @@ def agent_phase(ctx: EnvContext) -> dict:
         "env_steps": result.env_steps,
         "train_s": round(result.wall_seconds, 2),
         "final": last,
-        "summary": f"{ctx.algo} {result.episodes:,} episodes; last update: {shown or 'no curve'}",
+        "curriculum": label(distribution),  # "dr", or the adaptive curriculum with its settings, as run.json records it
+        "summary": f"{ctx.algo} {result.episodes:,} episodes{via(distribution)}; last update: {shown or 'no curve'}",
     }
+
+
+def via(distribution: Any) -> str:
+    """`` with curriculum plr`` for an adaptive curriculum, nothing for ``dr``."""
+    return f" with curriculum {distribution.name}" if getattr(distribution, "adaptive", False) else ""
+
+
+def training_worlds(ctx: EnvContext) -> tuple[Any, str]:
+    """(what the agent phase trains on, how ``run.json`` records it): the dataset's worlds for ``dr``, else
+    the preset's curriculum over G(z) of the run's generator, recorded as ``worldagent train`` records it."""
+    from worldagent.agents.distributions import world_distribution
+
+    layout, request = ctx.layout, ctx.preset.curriculum_of(ctx.env)
+    if request is None:
+        return world_distribution(ctx.spec, str(layout.dataset_path)), layout.rel(layout.dataset_path)
+    from worldagent.agents.distributions import LatentWorlds
+    from worldagent.curricula import label
+    from worldagent.reproduce.presets import make_curriculum_of
+    from worldagent.worlds.generator import load_generator
+
+    generator = load_generator(layout.generator_dir, layout.dataset_path)[0]
+    curriculum = make_curriculum_of(ctx.env, request, LatentWorlds(generator))
+    return curriculum, f"{layout.rel(layout.generator_dir)}; curriculum {label(curriculum)}"
 
 
 # -- phase 3: optimising worlds (paper §4.4, §6.1) ------------------------------------------------
@@ -436,18 +462,22 @@ DEPENDS = {
     "influence": ("generator", "agent"),
     "atlas": ("generator", "agent"),
 }
+# An agent trained with an adaptive curriculum drew its worlds from G(z): it is computed from the generator too.
+CURRICULUM_DEPENDS = {**DEPENDS, "agent": ("dataset", "generator")}
 
 
-def dependents(phase: str) -> list[str]:
-    """``phase`` and every phase computed (directly or not) from it, in pipeline order."""
-    if phase not in DEPENDS:
-        raise WorldagentError(f"unknown phase {phase!r}; use one of: {', '.join(DEPENDS)}.")
+def dependents(phase: str, curriculum: bool = False) -> list[str]:
+    """``phase`` and every phase computed (directly or not) from it, in pipeline order; ``curriculum``:
+    the agents train with an adaptive curriculum (``Preset.curriculum_of``), over G(z)."""
+    depends = CURRICULUM_DEPENDS if curriculum else DEPENDS
+    if phase not in depends:
+        raise WorldagentError(f"unknown phase {phase!r}; use one of: {', '.join(depends)}.")
     found = {phase}
     changed = True
     while changed:
         changed = False
-        for name, parents in DEPENDS.items():
+        for name, parents in depends.items():
             if name not in found and found.intersection(parents):
                 found.add(name)
                 changed = True
-    return [name for name in DEPENDS if name in found]
+    return [name for name in depends if name in found]

@@ -39,9 +39,10 @@ def resolve_envs(env: str, preset: Preset) -> list[str]:
     return [env]
 
 
-def restart_closure(phases: Iterable[str]) -> list[str]:
-    """The phases to redo for ``--restart`` of ``phases`` (with all that depends on them)."""
-    found = {name for phase in phases for name in dependents(phase)}
+def restart_closure(phases: Iterable[str], curriculum: bool = False) -> list[str]:
+    """The phases to redo for ``--restart`` of ``phases`` (with all that depends on them; ``curriculum``:
+    the agents train with an adaptive curriculum over G(z), so redoing the generator redoes them)."""
+    found = {name for phase in phases for name in dependents(phase, curriculum)}
     return [name for name in PHASES if name in found]
 
 
@@ -62,8 +63,10 @@ def reproduce(
         The manifest as it stands at the end.
     """
     out = Path(out)
+    for env in envs:
+        preset.check_curriculum(env)  # refused in one line before anything is read or written
     manifest = Manifest.open(out)
-    redo = restart_closure(restart)
+    redo = restart_closure(restart, adaptive(preset, envs))
     for env in envs:
         forget_phases(manifest, EnvContext(out, env, preset), redo)
     check_configs(manifest, preset, envs)
@@ -89,6 +92,11 @@ def reproduce(
 def report_outputs(path: Path, out: Path) -> dict:
     """The report phase's record: where the report is and how big."""
     return {"report": str(path.relative_to(out)), "summary": f"{path} ({path.stat().st_size / 1e6:.1f} MB)"}
+
+
+def adaptive(preset: Preset, envs: list[str]) -> bool:
+    """Whether the agents of ``envs`` train with an adaptive curriculum (over G(z): the generator's dependents)."""
+    return any(preset.curriculum_of(env) is not None for env in envs)
 
 
 def check_configs(manifest: Manifest, preset: Preset, envs: list[str]) -> None:

@@ -109,6 +109,26 @@ class EnvBudgets:
 
 
 @dataclass(frozen=True)
+class Curriculum:
+    """The curriculum every env's agent trains with (``reproduce --curriculum``; ``worldagent train`` takes the same).
+
+    Attributes:
+        name: a curriculum of ``curricula.curricula()``: ``dr`` (the default: the agent trains on
+            the dataset's procedural worlds, as the paper's did) or an adaptive one (``plr``,
+            ``accel``, ``target``), which draws latents z of the run's own G(z).
+        target: the event or metric the curriculum scores episodes by (``--target``); None:
+            learning potential, and for ``target`` each env's ``spec.failure``.
+        maximize: with ``target`` a metric: train toward worlds where it is high (True) / low (False).
+        settings: ``--curriculum-set``'s {setting: value} over the curriculum's defaults.
+    """
+
+    name: str = "dr"
+    target: str | None = None
+    maximize: bool | None = None
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Preset:
     """Everything ``worldagent reproduce`` needs to know, for every environment that has the preset.
 
@@ -125,6 +145,8 @@ class Preset:
         settings: ``{algo: {config field: value}}`` set on every agent trained with ``algo``
             (``reproduce --set``, ``algorithms.parse_settings``), over the env's own settings and
             the budgets' ``train_envs`` / ``learning_starts``.
+        curriculum: the curriculum of every env's agent (``reproduce --curriculum``); checked per
+            env by ``check_curriculum`` before any phase runs.
     """
 
     name: str
@@ -136,6 +158,7 @@ class Preset:
     vae_batch_size: int = 128
     algo: str | None = None
     settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    curriculum: Curriculum = field(default_factory=Curriculum)
 
     def __post_init__(self):
         if self.repeats < 1 or self.seed < 0:
@@ -193,6 +216,31 @@ class Preset:
         settings = {algo: dict(fields) for algo, fields in settings.items() if fields}
         return replace(self, settings=settings) if settings else self
 
+    def with_curriculum(self, name: str = "dr", target: str | None = None, maximize: bool | None = None, settings: Mapping | None = None) -> Preset:
+        """This preset with every env's agent trained with curriculum ``name`` (``--curriculum``, ``--target``,
+        ``--maximize/--minimize``, ``--curriculum-set`` parsed by ``curricula.parse_curriculum_settings``)."""
+        return replace(self, curriculum=Curriculum(name, target, maximize, dict(settings or {})))
+
+    def curriculum_of(self, env: str) -> dict[str, Any] | None:
+        """What ``env``'s agent phase records of its curriculum (None for ``dr``, so earlier runs still match):
+        name, settings and, where there is one, the target (``target``'s default: ``spec.failure``)."""
+        chosen = self.curriculum
+        if chosen.name == "dr" and not chosen.settings and chosen.target is None and chosen.maximize is None:
+            return None
+        target = chosen.target if chosen.target is not None or chosen.name != "target" else (registry.get(env).failure or None)
+        return {
+            "name": chosen.name,
+            "settings": dict(chosen.settings),
+            **({"target": target} if target is not None else {}),
+            **({"maximize": chosen.maximize} if chosen.maximize is not None else {}),
+        }
+
+    def check_curriculum(self, env: str) -> None:
+        """Refuse, in one line and before any work, a curriculum ``worldagent train`` would refuse for ``env``."""
+        request = self.curriculum_of(env)
+        if request is not None:
+            make_curriculum_of(env, request, None)
+
     def settings_of(self, env: str) -> dict[str, Any]:
         """The config fields ``--set`` gives ``env``'s agents (those of its algorithm)."""
         return dict(self.settings.get(self.algo_of(env), {}))
@@ -211,6 +259,7 @@ class Preset:
                 "learning_starts": b.learning_starts,
                 **({"options": options} if options else {}),
                 **({"settings": self.settings_of(env)} if self.settings_of(env) else {}),  # absent without --set: earlier runs still match
+                **({"curriculum": self.curriculum_of(env)} if self.curriculum_of(env) else {}),  # absent for dr, likewise
             },
             "random": {"worlds": b.random_worlds, "repeats": self.repeats},
             "strategic": {"budget": b.strategic_budget, "repeats": self.repeats, "optimiser": "cmaes"},
@@ -256,6 +305,27 @@ class Preset:
     def options_of(self, env: str) -> dict[str, Any]:
         """The env options of ``env``'s agents: ``spec.reproduce_options`` with the budgets' on top."""
         return {**registry.get(env).reproduce_options, **self.budgets(env).options}
+
+
+def make_curriculum_of(env: str, request: dict, worlds: Any) -> Any:
+    """The curriculum ``request`` (``Preset.curriculum_of``) over ``worlds``, checked as ``worldagent train`` checks it.
+
+    ``worlds`` None only checks the request: the curriculum is built over a placeholder G(z), so
+    every refusal of ``train`` (an unknown name or setting, a value out of range, ``--maximize``
+    without ``--target``, a target the env cannot score, ``dr`` given settings) comes from the
+    same ``curricula`` code before any phase runs.
+    """
+    from worldagent.agents.distributions import LatentWorlds
+    from worldagent.curricula import check_request, make_curriculum
+    from worldagent.curricula.scores import target_score
+
+    target, maximize = request.get("target"), request.get("maximize")
+    if maximize is not None and target is None:
+        raise WorldagentError("--maximize/--minimize direct a --target metric; add --target METRIC (e.g. --target conflict --minimize).")
+    settings = dict(request.get("settings", {}))
+    check_request(request["name"], settings, True)  # the agent phase draws G(z) of the run's generator: latents there are
+    scoring = target_score(env, target, maximize) if target is not None else None
+    return make_curriculum(request["name"], LatentWorlds(None) if worlds is None else worlds, settings, scoring)
 
 
 # name -> (description, settings other than budgets); budgets come from each EnvSpec.presets[name]

@@ -30,11 +30,24 @@ def cell_centres(positions, world, size: int):
     return np.stack([(cells[..., 1] + 0.5) * size / side, (cells[..., 0] + 0.5) * size / side], axis=-1)
 
 
+def goal_mark(env, state):
+    """The toy's goal cell, shown until the agent reaches it (what a spec's ``marks`` gives: harvest's apples)."""
+    import jax.numpy as jnp
+
+    side = state.world.goal.shape[-1]
+    index = jnp.argmax(jnp.ravel(state.world.goal))
+    return {"goal": (jnp.stack([index // side, index % side]).astype(jnp.int32)[None], ~jnp.reshape(state.reached, (1,)))}
+
+
+GOAL_STYLE = {"goal": {"shape": "dot", "colour": "#ff00ff", "radius": 0.06}}
+
+
 def explorer_toy():
-    """The toy env's spec with a picture locator and a failure event (what the explorer's views use)."""
+    """The toy env's spec with a picture locator, marks and a failure event (what the explorer's views use)."""
     import toy_env
 
-    return dataclasses.replace(toy_env.SPEC, pictures=dataclasses.replace(toy_env.SPEC.pictures, locate=cell_centres), failure="reached < 0.5")
+    pictures = dataclasses.replace(toy_env.SPEC.pictures, locate=cell_centres, marks=goal_mark, mark_styles=GOAL_STYLE)
+    return dataclasses.replace(toy_env.SPEC, pictures=pictures, failure="reached < 0.5")
 
 
 @contextlib.contextmanager

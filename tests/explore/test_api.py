@@ -106,6 +106,22 @@ def test_play_returns_each_episode_on_the_picture(client):
     assert latent["z"] == [0, 0, 0] and set(latent["means"]) >= {"return", "reached", "steps"}
 
 
+def test_play_carries_the_marks_step_by_step(client, toy_run):
+    """The toy's one mark, its goal, is there from the start and vanishes at the step the agent reaches it."""
+    played = client.post("/api/toy/play", json={"world": 2, "agent": "scripted/random", "episodes": 4, "seed": 2, "size": 70}).json()
+    assert played["marks"] == {"goal": {"shape": "dot", "colour": "#ff00ff", "radius": 4.2}}  # 0.06 of 70 px
+    goal = np.argwhere(stored(toy_run)[2].world["goal"])[0]
+    at = [(goal[1] + 0.5) * 10, (goal[0] + 0.5) * 10]
+    for episode in played["episodes"]:
+        changes = episode["marks"]["goal"]
+        assert changes[0] == [0, [at], []]
+        if episode["metrics"]["reached"]:
+            assert changes[1:] == [[episode["steps"], [], [at]]]  # reached at the last step
+        else:
+            assert changes[1:] == []
+    assert 0 < sum(e["metrics"]["reached"] for e in played["episodes"]) < 4  # some episodes reach it, some do not
+
+
 def test_failures_rank_by_prior_likelihood_and_severity(client, toy_run):
     evaluations = stored(toy_run)
     reached = np.array([np.mean([e["reached"] for e in ev.episodes]) for ev in evaluations])

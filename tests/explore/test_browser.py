@@ -156,10 +156,38 @@ def test_map_world_sliders_and_play(page):
             " let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n; })()"
         )
         assert painted > 50  # trails and agents were drawn over the world
+        check_marks(page)
     else:  # no Pictures.locate: the env's own picture of the episodes replaces the world's
         assert page.get_attribute("#world-img", "src").startswith("data:image/png;base64,")
     assert page.locator("#metrics-1 tr").count() > 1 and page.locator("#metrics-2 tr").count() > 1
     shot(page, "world")
+
+
+def check_marks(page) -> None:
+    """The env's marks (``Pictures.marks``: the toy's goal, harvest's apples and beams) drawn frame by frame."""
+    marks = page.evaluate("explorer.state.players[0].marks")
+    if not marks:
+        assert page.get_attribute("#world-canvas", "data-marks") == "0"
+        return
+    shown = page.evaluate(
+        "(() => { const r = explorer.state.players[0]; explorer.drawFrame(0, r, 0);"
+        " const c = document.querySelector('#world-canvas'); const counts = {};"
+        " r.episodes.forEach(e => Object.entries(e.marks).forEach(([k, ch]) => (ch[0] && ch[0][0] === 0 ? ch[0][1] : []).forEach(xy => { counts[xy] = (counts[xy] || 0) + 1; })));"
+        " const full = Object.keys(counts).find(k => counts[k] === r.episodes.length);"
+        " const [x, y] = full.split(',').map(v => Math.floor(Number(v) * c.width / r.size));"
+        " return { drawn: Number(c.dataset.marks), points: Object.keys(counts).length, pixel: [...c.getContext('2d').getImageData(x, y, 1, 1).data] }; })()"
+    )
+    assert shown["drawn"] == shown["points"] > 0  # every mark there at the start, once
+    kind = next(iter(marks))
+    colour = [int(marks[kind]["colour"][i : i + 2], 16) for i in (1, 3, 5)]
+    if len(marks) == 1:  # one kind: the pixel under a mark every episode shows is the mark's colour
+        assert shown["pixel"] == [*colour, 255]
+    last = int(page.text_content("#frames"))
+    page.evaluate(f"explorer.drawFrame(0, explorer.state.players[0], {last})")
+    ended = page.evaluate(
+        "explorer.state.players[0].episodes.map(e => Object.values(e.marks).flat().map(c => c[1].length - c[2].length).reduce((a, b) => a + b, 0))"
+    )
+    assert int(page.get_attribute("#world-canvas", "data-marks")) <= sum(ended)  # what is left at the end (episodes sharing a place count once)
 
 
 def test_an_atlas_cell_opens_its_world(page):

@@ -125,12 +125,21 @@ class Pictures:
         locate: ``(positions f[..., P], world, size) -> f[..., 2]``: where positions as ``trace``
             records them fall on ``world(world, size)``, as pixel (x, y); the explorer animates
             episodes with it (None: it shows ``episodes``' still picture instead).
+        marks: ``(env, state) -> {kind: (positions [K, P], shown bool[K])}``: what else the
+            explorer's animation draws at each step besides the agents (harvest: the apples, the
+            TAG beams, where tagged-out agents were hit), recorded at every step of its replay as
+            ``trace`` is; positions as ``trace`` records them (``locate`` places them), K fixed
+            per kind, ``shown`` the ones there now. None: the agents only.
+        mark_styles: ``kind -> {"shape": "dot" | "square" | "ring", "colour": CSS colour,
+            "radius": fraction of the picture's side}``: how the animation draws each kind.
     """
 
     world: Callable[[Any, int], Any]
     episodes: Callable[[Any, Any, Any], None] | None = None
     sheet: Callable[[Any, Any], Any] | None = None
     locate: Callable[[Any, Any, int], Any] | None = None
+    marks: Callable[[Any, Any], Mapping[str, tuple[Any, Any]]] | None = None
+    mark_styles: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.events import parse_selection
 from worldagent.explore import views
-from worldagent.explore.episodes import episodes_payload
+from worldagent.explore.episodes import episodes_payload, replay_marked
 from worldagent.runs import Run
 
 RUN_AGENT = "run"  # the label of the run's own trained agent
@@ -310,16 +310,14 @@ class EnvSession:
             self.play(world, next(iter(self.agents)), episodes, 0, 64)
 
     def play(self, world: Any, agent: str, episodes: int, seed: int, size: int) -> dict:
-        """Play ``episodes`` episodes of ``agent`` on ``world`` now; where the agents went, as pixels on its picture."""
+        """Play ``episodes`` episodes of ``agent`` on ``world`` now; where the agents went, as pixels on its picture, and the env's marks."""
         import jax
-
-        from worldagent.evaluation.trajectories import replay
 
         with self.lock:
             setup = self.setup(agent)
             keys = jax.random.split(jax.random.key(int(seed)), int(episodes))
-            played = replay(self.spec, setup.env, setup.policy, world, keys, setup.params)
-        return episodes_payload(self.spec, world, played, setup.params, size)
+            played, marks = replay_marked(self.spec, setup.env, setup.policy, world, keys, setup.params)
+        return episodes_payload(self.spec, world, played, setup.params, size, marks)
 
 
 def run_latent_dim(run: Run, env: str, evaluations: list) -> int:

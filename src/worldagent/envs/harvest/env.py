@@ -101,6 +101,8 @@ class HarvestState:
         conflict_steps: int32 steps that ended with at least one agent tagged out.
         untagged_agent_steps: int32 agent-steps that ended on the map, for peace.
         times_tagged: int32[N] how often each agent was hit.
+        fired: bool[N] the agents whose TAG beam fired in the last step (none after reset); with
+            ``position`` and ``heading`` it says where the beam went (``beam_reach``).
     """
 
     world: HarvestMap
@@ -114,6 +116,7 @@ class HarvestState:
     conflict_steps: jax.Array
     untagged_agent_steps: jax.Array
     times_tagged: jax.Array
+    fired: jax.Array
 
 
 def make_params(can_tag=None, regrowth_probability=None, tag_out_steps: int = 25, max_steps: int = 1000) -> HarvestParams:
@@ -185,15 +188,21 @@ def beam_cells(position: jax.Array, heading: jax.Array, length: int) -> jax.Arra
     return position[:, None, None, :] + lane + distance
 
 
+def beam_reach(position: jax.Array, heading: jax.Array, firing: jax.Array, walls: jax.Array, length: int) -> tuple[jax.Array, jax.Array]:
+    """``(cells int32[N, 3, L, 2], lit bool[N, 3, L])``: each agent's beam cells and which of them
+    its beam reaches when it fires (each lane stops at its first wall or the grid edge)."""
+    cells = beam_cells(position, heading, length)
+    is_wall = walls.at[cells[..., 0], cells[..., 1]].get(mode="fill", fill_value=True)
+    return cells, jnp.cumprod(~is_wall, axis=-1).astype(bool) & firing[:, None, None]
+
+
 def fire_beams(position: jax.Array, heading: jax.Array, firing: jax.Array, on_map: jax.Array, walls: jax.Array, length: int) -> jax.Array:
     """bool[N]: agents hit by another agent's beam.
 
     The beam is 3 cells wide and ``length`` long; each lane stops at its first wall (or the
     grid edge). It passes through agents, hitting every one on it.
     """
-    cells = beam_cells(position, heading, length)
-    is_wall = walls.at[cells[..., 0], cells[..., 1]].get(mode="fill", fill_value=True)
-    lit = jnp.cumprod(~is_wall, axis=-1).astype(bool) & firing[:, None, None]  # [N, 3, L]
+    cells, lit = beam_reach(position, heading, firing, walls, length)  # [N, 3, L, 2], [N, 3, L]
     on_beam = (cells[:, :, :, None, :] == position[None, None, None, :, :]).all(-1) & lit[..., None]  # [shooter, 3, L, target]
     hit = on_beam.any(axis=(1, 2)) & ~jnp.eye(position.shape[0], dtype=bool)
     return hit.any(axis=0) & on_map
@@ -341,6 +350,7 @@ class Harvest(Environment):
             conflict_steps=jnp.int32(0),
             untagged_agent_steps=jnp.int32(0),
             times_tagged=jnp.zeros(NUM_AGENTS, jnp.int32),
+            fired=jnp.zeros(NUM_AGENTS, bool),
         )
         return self.observe(state, params), state
 
@@ -361,7 +371,8 @@ class Harvest(Environment):
         heading = rotate(state.heading, action)
         position = move(priority, state.position, heading, action, on_map, walls)
         apples, harvested = harvest(state.apples, position, on_map)
-        hit = fire_beams(position, heading, action == TAG, on_map, walls, self.beam_length)
+        fired = action == TAG  # masked: only agents on the map and allowed to tag
+        hit = fire_beams(position, heading, fired, on_map, walls, self.beam_length)
         corners = jnp.asarray(spawn_corners(*walls.shape))
         timer, position, heading = advance_tag_out(state.tagged_timer, hit, on_map, position, heading, corners, params.tag_out_steps)
         now_on_map = timer == 0
@@ -380,6 +391,7 @@ class Harvest(Environment):
             conflict_steps=state.conflict_steps + (~now_on_map).any().astype(jnp.int32),
             untagged_agent_steps=state.untagged_agent_steps + now_on_map.sum(dtype=jnp.int32),
             times_tagged=state.times_tagged + hit.astype(jnp.int32),
+            fired=fired,
         )
         terminated = jnp.zeros(NUM_AGENTS, bool)
         truncated = jnp.broadcast_to(time >= params.max_steps, (NUM_AGENTS,))

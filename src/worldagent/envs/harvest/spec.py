@@ -146,6 +146,33 @@ def trace(state):
     return state.position, state.tagged_timer == 0
 
 
+def marks(env, state):
+    """What the explorer's animation draws besides the agents, as (row, col) cells with which are there now:
+    ``apple`` every cell (shown: an apple on it), ``beam`` every agent's beam cells (shown: lit by a
+    beam fired this step), ``tagged`` each agent's cell (shown: it is tagged out; where it was hit)."""
+    import jax.numpy as jnp
+
+    from worldagent.envs.harvest.env import beam_reach
+
+    apples = state.apples
+    height, width = apples.shape
+    rows, cols = jnp.meshgrid(jnp.arange(height, dtype=jnp.int32), jnp.arange(width, dtype=jnp.int32), indexing="ij")
+    cells, lit = beam_reach(state.position, state.heading, state.fired, state.world.walls, env.beam_length)
+    return {
+        "apple": (jnp.stack([rows.ravel(), cols.ravel()], axis=-1), apples.ravel()),
+        "beam": (cells.reshape(-1, 2).astype(jnp.int32), lit.ravel()),
+        "tagged": (state.position, state.tagged_timer > 0),
+    }
+
+
+CELL = 1 / DEFAULT_SIZE  # one cell, as a fraction of the picture's side
+MARK_STYLES = {
+    "apple": {"shape": "dot", "colour": "#5dff7a", "radius": 0.22 * CELL},
+    "beam": {"shape": "square", "colour": "#ffe14d", "radius": 0.45 * CELL},
+    "tagged": {"shape": "ring", "colour": "#b4b4b4", "radius": 0.38 * CELL},
+}
+
+
 def world_picture(world, size: int):
     from PIL import Image
 
@@ -226,7 +253,7 @@ SPEC = register(
             default_descriptors=("wall_share", "apple_clustering"),
         ),
         trace=trace,
-        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate),
+        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate, marks=marks, mark_styles=MARK_STYLES),
         scripted={"random": uniform, "greedy": greedy},
         algorithms=("dqn",),
         presets={

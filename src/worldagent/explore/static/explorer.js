@@ -271,6 +271,7 @@ function clearCanvas(i) {
   canvas.width = 384; canvas.height = 384;
   canvas.getContext("2d").clearRect(0, 0, 384, 384);
   canvas.dataset.frame = "0";
+  canvas.dataset.marks = "0";
 }
 
 function drawFrame(i, result, frame) {
@@ -279,6 +280,7 @@ function drawFrame(i, result, frame) {
   canvas.dataset.frame = String(frame);
   if (!result || !result.episodes.length || result.episodes[0].path === null) return;
   const scale = canvas.width / result.size;
+  canvas.dataset.marks = String(result.marks ? drawMarks(ctx, result, frame, scale) : 0);
   result.episodes.forEach((episode, e) => {
     const last = Math.min(frame, episode.path.length - 1), agents = episode.path[0].length;
     for (let a = 0; a < agents; a++) {
@@ -306,6 +308,60 @@ function drawFrame(i, result, frame) {
       }
     }
   });
+}
+
+// Marks (Pictures.marks): what the env shows besides the agents (harvest: apples, beams, tagged-out agents).
+// Each episode carries, per kind, the steps where marks appear or vanish: [step, appeared [[x, y]], vanished [[x, y]]].
+function marksAt(episode, frame) {
+  // the marks there at `frame`, as {kind: Map("x,y" -> count)}: replayed on from the last frame asked, or from the start
+  let cursor = episode.markCursor;
+  if (!cursor || frame < cursor.frame) cursor = episode.markCursor = { frame: -1, next: {}, shown: {} };
+  for (const [kind, changes] of Object.entries(episode.marks || {})) {
+    const shown = cursor.shown[kind] || (cursor.shown[kind] = new Map());
+    let k = cursor.next[kind] || 0;
+    for (; k < changes.length && changes[k][0] <= frame; k++) {
+      const [, appeared, vanished] = changes[k];
+      for (const xy of vanished) {
+        const key = xy.join(","), left = (shown.get(key) || 0) - 1;
+        if (left > 0) shown.set(key, left); else shown.delete(key);
+      }
+      for (const xy of appeared) { const key = xy.join(","); shown.set(key, (shown.get(key) || 0) + 1); }
+    }
+    cursor.next[kind] = k;
+  }
+  cursor.frame = frame;
+  return cursor.shown;
+}
+
+function drawMarks(ctx, result, frame, scale) {
+  // the world's still picture dimmed, then every kind's marks at this frame; a mark in only some of the
+  // episodes is fainter. Returns how many marks were drawn.
+  ctx.fillStyle = "rgba(0, 0, 0, 0.45)";
+  ctx.fillRect(0, 0, ctx.canvas.width, ctx.canvas.height);
+  const counts = {};
+  result.episodes.forEach((episode) => {
+    for (const [kind, shown] of Object.entries(marksAt(episode, Math.min(frame, episode.steps)))) {
+      const total = counts[kind] || (counts[kind] = new Map());
+      shown.forEach((n, key) => total.set(key, (total.get(key) || 0) + Math.min(n, 1)));
+    }
+  });
+  let drawn = 0;
+  for (const [kind, style] of Object.entries(result.marks)) {
+    const r = style.radius * scale;
+    ctx.fillStyle = ctx.strokeStyle = style.colour;
+    ctx.lineWidth = 2;
+    (counts[kind] || new Map()).forEach((n, key) => {
+      const [x, y] = key.split(",").map((v) => Number(v) * scale);
+      ctx.globalAlpha = 0.3 + (0.7 * n) / result.episodes.length;
+      ctx.beginPath();
+      if (style.shape === "square") ctx.fillRect(x - r, y - r, 2 * r, 2 * r);
+      else if (style.shape === "ring") { ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.stroke(); }
+      else { ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.fill(); }
+      drawn++;
+    });
+  }
+  ctx.globalAlpha = 1;
+  return drawn;
 }
 
 async function saveWorld() {
@@ -398,5 +454,5 @@ $("agent").addEventListener("change", updateExport);
 $("agent2").addEventListener("change", updateExport);
 $("reset-z").addEventListener("click", () => { if (state.baseZ) { setSliders(state.baseZ); state.z = state.baseZ.slice(); redrawLatent(); } });
 for (const button of document.querySelectorAll("#tabs button")) button.addEventListener("click", () => show(button.dataset.view));
-window.explorer = { state, openWorld, openLatent, play };  // for scripts and the browser tests
+window.explorer = { state, openWorld, openLatent, play, drawFrame };  // for scripts and the browser tests
 start();

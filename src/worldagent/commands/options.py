@@ -79,6 +79,25 @@ def backend(name: str, address: str | None):
     return make_backend(name, address)
 
 
+def curricula_help() -> str:
+    """``--curriculum``'s help: the curricula there are."""
+    from worldagent.curricula import curricula
+
+    return ", ".join(curricula()) + " (dr, every world afresh, is the default; see docs/curriculum.md)."
+
+
+def curriculum_set_flag():
+    """``--curriculum-set NAME=VALUE`` (repeatable), naming the settings there are."""
+    import dataclasses
+
+    from worldagent.curricula.replay import Settings
+
+    names = ", ".join(f.name for f in dataclasses.fields(Settings))
+    return typer.Option(
+        [], "--curriculum-set", metavar="NAME=VALUE", help=f"A curriculum setting (repeatable): {names}; defaults in docs/curriculum.md."
+    )
+
+
 def command_setup(
     env: str, agent: str, generator, option: list[str], *, stochastic: bool, repeats: int, backend_name: str, ray_address, greedy: bool = False
 ):

@@ -7,14 +7,9 @@ from pathlib import Path
 import typer
 
 from worldagent.commands.console import console, friendly_errors, status_line
-from worldagent.commands.options import check_store, set_flag
-from worldagent.commands.train import curricula_help
+from worldagent.commands.options import check_store, curricula_help, curriculum_set_flag, set_flag
 from worldagent.files import check_writable
 
-CURRICULUM_SET_HELP = (
-    "A curriculum setting NAME=VALUE (repeatable), as `worldagent train --curriculum-set` takes it: buffer_size, replay_prob, "
-    "temperature, staleness, min_fill, edit_prob, mutation_scale, window, robust; defaults in docs/curriculum.md."
-)
 REPRODUCE_SET_HELP = (
     "A training setting NAME=VALUE (repeatable): sets that field of the config of every env's algorithm that has it; "
     "ALGO.NAME=VALUE only for agents trained with ALGO, e.g. --set ppo.learning_rate=1e-3. Over the algorithm's defaults and the env's own "
@@ -81,7 +76,7 @@ def register(app: typer.Typer) -> None:
             "--curriculum target without it: each env's failure event (`worldagent envs`).",
         ),
         maximize: bool = typer.Option(None, "--maximize/--minimize", help="With --target METRIC: train toward worlds where it is high / low."),
-        curriculum_settings: list[str] = typer.Option([], "--curriculum-set", metavar="NAME=VALUE", help=CURRICULUM_SET_HELP),
+        curriculum_settings: list[str] = curriculum_set_flag(),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
     ) -> None:

@@ -12,6 +12,8 @@ from worldagent.commands.options import (
     algorithm,
     check_seed,
     check_training_episodes,
+    curricula_help,
+    curriculum_set_flag,
     env_argument,
     env_options,
     option_flag,
@@ -19,12 +21,6 @@ from worldagent.commands.options import (
 )
 from worldagent.errors import WorldagentError
 from worldagent.files import check_writable
-
-
-def curricula_help() -> str:
-    from worldagent.curricula import curricula
-
-    return ", ".join(curricula()) + " (dr, every world afresh, is the default; see docs/curriculum.md)."
 
 
 def register(app: typer.Typer) -> None:
@@ -46,12 +42,7 @@ def register(app: typer.Typer) -> None:
             None, "--target", help="Score worlds by this event (e.g. 'crash_rate > 0.5') or, with --maximize/--minimize, this metric."
         ),
         maximize: bool = typer.Option(None, "--maximize/--minimize", help="With --target METRIC: train toward worlds where it is high / low."),
-        curriculum_settings: list[str] = typer.Option(
-            [],
-            "--curriculum-set",
-            help="A curriculum setting NAME=VALUE (repeatable): buffer_size, replay_prob, temperature, staleness, "
-            "min_fill, edit_prob, mutation_scale, window, robust; defaults in docs/curriculum.md.",
-        ),  # fmt: skip
+        curriculum_settings: list[str] = curriculum_set_flag(),
         option: list[str] = option_flag(),
         settings: list[str] = set_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the run."),
@@ -63,7 +54,7 @@ def register(app: typer.Typer) -> None:
         from worldagent.agents.distributions import world_distribution
         from worldagent.agents.training import train as run_training
         from worldagent.curricula import check_request, label, late_replay_warning, make_curriculum, parse_curriculum_settings
-        from worldagent.curricula.scores import target_score
+        from worldagent.curricula.scores import requested_target
         from worldagent.envs import registry
 
         spec = registry.get(env)
@@ -75,9 +66,7 @@ def register(app: typer.Typer) -> None:
         if worlds == "vae" and generator is None:
             raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
         config = training_config(spec, algo, episodes=episodes, options=options, **parse_settings(settings, [algo])[algo])
-        if maximize is not None and target is None:
-            raise WorldagentError("--maximize/--minimize direct a --target metric; add --target METRIC (e.g. --target conflict --minimize).")
-        scoring = target_score(spec, target, maximize) if target is not None else None
+        scoring = requested_target(spec, target, maximize)
         settings = parse_curriculum_settings(curriculum_settings)
         check_request(curriculum, settings, worlds == "vae" or (Path(worlds) / "generator.json").is_file())
         distribution = world_distribution(spec, worlds, generator_dir=generator, progress=not quiet)

@@ -79,6 +79,15 @@ def target_score(env, text: str, maximize: bool | None = None) -> TargetScore:
     return TargetScore(shown, clauses)
 
 
+def requested_target(env, text: str | None, maximize: bool | None) -> TargetScore | None:
+    """The target of ``--target`` / ``--maximize`` / ``--minimize`` (None when no ``--target``); a direction without a target is refused."""
+    if text is None:
+        if maximize is not None:
+            raise WorldagentError("--maximize/--minimize direct a --target metric; add --target METRIC (e.g. --target conflict --minimize).")
+        return None
+    return target_score(env, text, maximize)
+
+
 def _episode_metric_names(spec) -> tuple[str, ...]:
     """The metrics the env itself reports per episode (``env.metrics``), read off shapes only."""
     import jax

@@ -317,14 +317,11 @@ def make_curriculum_of(env: str, request: dict, worlds: Any) -> Any:
     """
     from worldagent.agents.distributions import LatentWorlds
     from worldagent.curricula import check_request, make_curriculum
-    from worldagent.curricula.scores import target_score
+    from worldagent.curricula.scores import requested_target
 
-    target, maximize = request.get("target"), request.get("maximize")
-    if maximize is not None and target is None:
-        raise WorldagentError("--maximize/--minimize direct a --target metric; add --target METRIC (e.g. --target conflict --minimize).")
     settings = dict(request.get("settings", {}))
     check_request(request["name"], settings, True)  # the agent phase draws G(z) of the run's generator: latents there are
-    scoring = target_score(env, target, maximize) if target is not None else None
+    scoring = requested_target(env, request.get("target"), request.get("maximize"))
     return make_curriculum(request["name"], LatentWorlds(None) if worlds is None else worlds, settings, scoring)
 
 

@@ -97,8 +97,11 @@ def offline_arm(
     with RunStore(work) as store:
         tried, _, worlds, latents, _, _ = find_worlds(store, spec, setup.env, setup.params, setup.policy, generator, selection, counts, progress)
     search_wall = time.perf_counter() - clock
-    if len(latents) == 0:
-        raise SystemExit(f"offline arm: none of {len(tried)} worlds has {selection.describe()}; raise --offline-search.")
+    if len(latents) == 0:  # nothing to retrain on: said, and the other arms go on
+        return {
+            "not_run": f"none of the {len(tried)} worlds the s{seeds[0]} dr agent played has {selection.describe()}",
+            "search_wall_seconds": round(search_wall, 1),
+        }
     trained = train_arm(spec, algo, config, options, WorldPool.create(worlds), seeds, work, progress)
     return {
         **trained,
@@ -203,7 +206,9 @@ def main(argv=None) -> dict:
     arms, per_seed = {}, {}
     if "offline" in args.arms and ("dr" not in args.arms or args.arms.index("offline") < args.arms.index("dr")):
         raise SystemExit("--arms: the offline arm selects its worlds with dr's first agent; list dr before offline.")
-    for arm in args.arms:
+    suffix = "" if episodes == defaults["episodes"] else f"-{episodes}"
+    out = RESULTS / f"curriculum-{spec.name}{suffix}.json"
+    for done, arm in enumerate(args.arms, start=1):
         if arm == "offline":
             counts = {"candidates": args.offline_search[0], "search_budget": args.offline_search[1], "repeats": args.repeats, "seed": 0}
             arms[arm] = offline_arm(
@@ -214,37 +219,35 @@ def main(argv=None) -> dict:
             curriculum = make_curriculum(arm, latents, settings if arm != "dr" else {}, target)
             trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
             arms[arm] = {"curriculum": label(curriculum), **trained}
-        trained = arms[arm]
-        clock = time.perf_counter()
-        per_seed[arm] = {}
-        for seed, agent_dir in zip(args.seeds, trained["dirs"]):
-            metrics = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz")
-            per_seed[arm][seed] = agent_statistics(spec, metrics, params)
-            print(arm, seed, {k: round(v, 4) if isinstance(v, float) else v for k, v in per_seed[arm][seed].items()}, flush=True)
-        arms[arm]["evaluation_wall_seconds"] = round(time.perf_counter() - clock, 1)
-
-    result = {
-        "env": spec.name,
-        "algorithm": algo,
-        "options": options,
-        "config": config.to_dict(),
-        "episodes": episodes,
-        "seeds": args.seeds,
-        "generator": str(generator_dir),
-        "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
-        "target": {"text": target_text, "maximize": args.maximize},
-        "curriculum_settings": settings,
-        "arms": arms,
-        "per_seed": per_seed,
-        "summary": compare(per_seed),
-        "not_run": NOT_RUN,
-        "machine": describe_machine(),
-        "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),
-    }
-    suffix = "" if episodes == defaults["episodes"] else f"-{episodes}"
-    out = RESULTS / f"curriculum-{spec.name}{suffix}.json"
-    write_text(out, json.dumps(result, indent=1, default=float))
-    print(f"wrote {out}")
+        if "dirs" in arms[arm]:
+            clock = time.perf_counter()
+            per_seed[arm] = {}
+            for seed, agent_dir in zip(args.seeds, arms[arm]["dirs"]):
+                cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
+                per_seed[arm][seed] = agent_statistics(spec, evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, cache), params)
+                print(arm, seed, {k: round(v, 4) if isinstance(v, float) else v for k, v in per_seed[arm][seed].items()}, flush=True)
+            arms[arm]["evaluation_wall_seconds"] = round(time.perf_counter() - clock, 1)
+        result = {
+            "env": spec.name,
+            "algorithm": algo,
+            "options": options,
+            "config": config.to_dict(),
+            "episodes": episodes,
+            "seeds": args.seeds,
+            "generator": str(generator_dir),
+            "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
+            "target": {"text": target_text, "maximize": args.maximize},
+            "curriculum_settings": settings,
+            "arms": arms,
+            "arms_pending": args.arms[done:],  # written after every arm: a partial file says what is still to come
+            "per_seed": per_seed,
+            "summary": compare(per_seed),
+            "not_run": NOT_RUN,
+            "machine": describe_machine(),
+            "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        }
+        write_text(out, json.dumps(result, indent=1, default=float))
+        print(f"wrote {out} ({arm} done)", flush=True)
     return result
 
 

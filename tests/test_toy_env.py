@@ -93,6 +93,7 @@ def test_library_route_train_search_strategic_influence(toy, toy_generator, tmp_
     assert summary, "influence returned nothing"
 
 
+@pytest.mark.example  # its own step in .ci/run with the example env's, outside the default run's 5 minutes
 def test_reproduce_tiny_has_a_toy_report_section(toy, tmp_path):
     from worldagent.reproduce.pipeline import reproduce
     from worldagent.reproduce.presets import get_preset

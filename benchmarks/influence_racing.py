@@ -2,11 +2,22 @@
 
     python benchmarks/influence_racing.py                    # ACKTR, rays, 5 seeds x 10,000 episodes, 1,000 worlds x 8
     python benchmarks/influence_racing.py --algo ppo --seeds 0 1 --episodes 2000 --eval-worlds 100 --work runs/influence-racing-small
+    # issue 26, item 1: the paper's regime (NAME: racing-regime.json's "chosen"), the paper's selection
+    python benchmarks/influence_racing.py --regime NAME --selection paper
+    # issue 26, item 2: our fully trained agent, its own failure, plus held-out failing worlds
+    python benchmarks/influence_racing.py --regime ours --selection ours
+    # smoke (tiny budgets; not a measurement, write it elsewhere):
+    python benchmarks/influence_racing.py --regime ours --selection ours --episodes 32 --eval-worlds 16 --seeds 0 1 \\
+        --candidates 16 --atlas-budget 105 --search-budget 105 --heldout-search-budget 105 \\
+        --generator runs/quick/racing/generator --work /tmp/influence-smoke --results /tmp/influence-smoke.json
 
 The agent sees what the paper's does (§5.1.1: "its surrounding area, as well as its current
-position and directional speed"): racing's ``rays`` observation, trained with the settings the
-racing spec gives it (``option_overrides``: those that made it lap, ``docs/racing.md``). Steps,
-each cached under ``--work`` (a killed run resumes where it stopped):
+position and directional speed"): racing's ``rays`` observation, trained with the settings of
+``--regime`` (``benchmarks/racing_regime.py``'s list; default ``ours``: those the racing spec
+gives it, ``option_overrides``, that made it lap, ``docs/racing.md``), the same for the given
+agent and both arms; ``--episodes`` scales the regime's budget (a 10,000-episode regime trains
+``--episodes``). Steps, each cached under ``--work`` (a killed run resumes where it stopped;
+another regime or budget than the default works under ``--work/regime-<name>-e<episodes>/``):
 
 1. the generator G(z): ``--generator`` if it holds one, else the paper preset's dataset and VAE
    made under ``--work``;
@@ -16,20 +27,33 @@ each cached under ``--work`` (a killed run resumes where it stopped):
    crash-maximising CMA-ME atlas of ``--atlas-budget`` worlds; and a census of every dataset
    track (``repeats`` episodes each): racing's repair maps every G(z) to its nearest dataset
    track, so the census bounds how many distinct tracks any search can select;
-4. ``experiments.influence`` with ``--selection``; ``auto`` takes the paper's when step 3 found
-   at least ``MIN_DISTINCT`` tracks, else ``crash_rate > 0`` (every track it crashed on at all);
-   candidates are random worlds plus an atlas search (``--search-budget``) toward the selection;
-5. speed: every trained agent's mean steps per lap (episodes that lapped) on the evaluation worlds.
+4. ``experiments.influence`` with ``--selection``: ``paper`` is the paper's ``crash_rate > 0.5``;
+   ``ours`` the agent's own failure, ``lap_completed < 0.5``; ``auto`` (the default) the paper's
+   when step 3 found at least ``MIN_DISTINCT`` tracks, else ``crash_rate > 0`` (every track it
+   crashed on at all); any other text is a selection as written. Candidates are random worlds
+   plus an atlas search (``--search-budget``) toward the selection, which collects distinct tracks;
+5. speed: every trained agent's mean steps per lap (episodes that lapped) on the evaluation worlds;
+6. held out (``--heldout``; ``auto``: with ``--selection ours``): for each seed k, the worlds
+   meeting the selection for seed k's *default* agent, among the evaluation worlds and in an
+   atlas search of ``--heldout-search-budget`` worlds toward the selection, less any track of the
+   influenced training worlds; seed k+1's (mod n) default and influenced agents are evaluated on
+   them (8 episodes each, the same keys for both): worlds neither was selected or trained on
+   (the default arm trains on G(z), where any track may come up).
 
-Writes ``benchmarks/results/influence-racing.json``: per-seed values, means with 95% intervals
-(Student t over seeds) and whether they overlap, the selection and how many distinct tracks it
-holds, the budgets, the machine and the paper's numbers.
+Writes ``benchmarks/results/influence-racing.json`` (``influence-racing-<regime>-<selection>.json``
+for another regime, budget or selection; ``--results`` to choose): the regime and every setting
+that differs from the paper's, the given agent's own rates, per-seed values, means with 95%
+intervals (Student t over seeds) and whether they overlap, the selection, its size and how many
+distinct tracks it holds, steps per lap, the held-out evaluation, the agents that failed to
+train (``failed_training``), the budgets, the machine and the paper's numbers.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -40,15 +64,18 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from influence_harvest import comparison  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
+from racing_regime import OPTIONS, REPEATS, episode_summary, in_window, regimes  # noqa: E402
 from worldagent import experiments  # noqa: E402
-from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
-from worldagent.influence.statistics import episode_values, mean_and_ci, summarise  # noqa: E402
-from worldagent.search.atlas import distinct_count  # noqa: E402
+from worldagent.influence.cache import load_influenced_worlds  # noqa: E402
+from worldagent.influence.experiment import trained_policies  # noqa: E402
+from worldagent.influence.statistics import episode_values, json_safe, mean_and_ci, summarise  # noqa: E402
+from worldagent.influence.worlds import search_direction  # noqa: E402
+from worldagent.search.atlas import distinct_count, world_key  # noqa: E402
 from worldagent.store import RunStore  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator, load_generator, save_generator  # noqa: E402
@@ -56,10 +83,13 @@ from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
 
 SPEC = registry.get("racing")
 PAPER = SPEC.presets["paper"]
-OPTIONS = {"observation": "rays"}  # respawn speed 0.5: the rays default
 PAPER_SELECTION = "crash_rate > 0.5"
 FALLBACK_SELECTION = "crash_rate > 0"
+OUR_SELECTION = "lap_completed < 0.5"  # issue 26, item 2: the agent's own failure (its training check's threshold)
+SELECTIONS = {"paper": PAPER_SELECTION, "ours": OUR_SELECTION}  # --selection's names (and "auto")
 MIN_DISTINCT = 50  # issue 13: the influenced distribution holds at least this many distinct tracks
+HELDOUT_SEED = 1000  # seed of the held-out atlas and episode keys: HELDOUT_SEED + the source seed
+EPISODE_METRICS = ("crashed", "lap_completed", "steps", "normalised_return", "return")
 
 
 def generator_dir(work: Path, given: Path, progress: bool) -> Path:
@@ -76,11 +106,10 @@ def generator_dir(work: Path, given: Path, progress: bool) -> Path:
     return gen_dir
 
 
-def given_agent(work: Path, algo: str, episodes: int, progress: bool) -> Path:
-    """The agent whose crashes select the worlds, trained on the procedural pool (resumed if killed)."""
+def given_agent(work: Path, algo: str, config, progress: bool) -> Path:
+    """The agent whose crashes select the worlds, trained on the procedural pool with ``config`` (resumed if killed)."""
     out = work / f"agent-{algo}"
     if not (out / "policy").exists():
-        config = training_config(SPEC, algo, episodes, options=OPTIONS)
         pool = world_distribution(SPEC, "generator", size=PAPER["worlds"], seed=0)
         train(SPEC, algo, config, pool, out, seed=0, options=OPTIONS, progress=progress, resume=True)
     return out
@@ -95,13 +124,15 @@ def distinct_failing(store: RunStore, campaigns: list[str], selection) -> dict:
 
 
 def paper_selection_reach(work: Path, setup, candidates: int, atlas_budget: int, progress: bool) -> dict:
-    """Step 3: distinct ``crash_rate > 0.5`` tracks among random candidates and in a crash atlas."""
+    """Step 3: distinct ``crash_rate > 0.5`` tracks among random candidates and in a crash atlas;
+    and the given agent's own rates on the random candidates (``racing_regime.episode_summary``)."""
     selection = experiments.failure_selection(PAPER_SELECTION, SPEC.name)
     with RunStore(work / "paper-selection") as store:
-        experiments.random_evaluation(store, setup, "crashed", worlds=candidates, seed=0, progress=progress)
+        found = experiments.random_evaluation(store, setup, "crashed", worlds=candidates, seed=0, progress=progress)
         random_name = experiments.campaign_names("crashed", 0)["random"]
         atlas = experiments.atlas(store, setup, "crash_rate", maximize=True, budget=atlas_budget, failure=PAPER_SELECTION, progress=progress)
         crash = np.array([e.score for e in store.evaluations(random_name)])
+        own = episode_summary({m: episode_values(found, m) for m in EPISODE_METRICS})
         return {
             "selection": PAPER_SELECTION,
             "random": {**distinct_failing(store, [random_name], selection), "crash_rate_mean": round(float(crash.mean()), 4)},
@@ -112,6 +143,7 @@ def paper_selection_reach(work: Path, setup, candidates: int, atlas_budget: int,
                 "max_crash_rate": round(float(max(e.score for e in atlas["evaluations"])), 4),
                 "coverage": round(float(atlas["coverage"]), 4),
             },
+            "given_agent": {**own, "in_paper_window": in_window(own["crash_rate"], own["lap_rate"]), "worlds": len(found), "repeats": setup.repeats},
         }
 
 
@@ -128,53 +160,178 @@ def dataset_census(gen_dir: Path, setup, repeats: int) -> dict:
     }
 
 
+def eval_campaign(name: str, result: dict) -> str:
+    """The campaign of ``influence.compare_agents`` holding agent ``name``'s evaluation episodes."""
+    return f"influence-eval-{name}-w{result['config']['eval_worlds']}-r{result['config']['repeats']}"
+
+
 def steps_per_lap(influence_dir: Path, result: dict) -> dict:
     """{label: {seed: mean steps of the lapped evaluation episodes}}: lower is faster."""
-    counts = result["config"]
     out: dict[str, dict[str, float]] = {}
     with RunStore(influence_dir) as store:
         for name in result["agents"]:
-            found = store.evaluations(f"influence-eval-{name}-w{counts['eval_worlds']}-r{counts['repeats']}")
+            found = store.evaluations(eval_campaign(name, result))
             steps, lapped = episode_values(found, "steps"), episode_values(found, "lap_completed") > 0.5
             label, seed = name.rsplit("-s", 1)
             out.setdefault(label, {})[seed] = round(float(steps[lapped].mean()), 2) if lapped.any() else float("nan")
     return out
 
 
+def per_world(worlds) -> list[dict]:
+    """A batched world as one dict of arrays per world (the run store's form)."""
+    arrays = SPEC.world_to_arrays(worlds)
+    return [{k: np.asarray(v[i]) for k, v in arrays.items()} for i in range(len(next(iter(arrays.values()))))]
+
+
+def decoded(G, latents: list[np.ndarray], batch: int = 250) -> list[dict]:
+    """The worlds G(z) of ``latents``, one dict of arrays each."""
+    out = []
+    for at in range(0, len(latents), batch):
+        out += per_world(jax.tree_util.tree_map(np.asarray, G(np.stack(latents[at : at + batch]))))
+    return out
+
+
+def summary_over_seeds(per_seed: dict[str, dict[str, dict]], metrics) -> dict:
+    """{metric: {label: mean_and_ci}} over the seeds whose value is finite (a seed that never lapped has no steps per lap)."""
+    return {m: {label: mean_and_ci([row[m] for row in rows.values() if np.isfinite(row[m])]) for label, rows in per_seed.items()} for m in metrics}
+
+
+def heldout_evaluation(influence_dir: Path, setup, result: dict, selection_text: str, search_budget: int, progress: bool) -> dict:
+    """Step 6: seed k+1's (mod n) default and influenced agents on the worlds failing for seed k's default agent
+    (``selection_text``), among the evaluation worlds and in an atlas toward it, less the influenced training tracks."""
+    seeds = [int(s) for s in result["config"]["seeds"]]
+    if len(seeds) < 2:
+        return {"skipped": "held-out worlds come from another seed's default agent: pass two or more --seeds"}
+    selection = experiments.failure_selection(selection_text, SPEC.name)
+    metric = selection.resolve(SPEC.name).metrics[0]
+    dirs = {name: influence_dir / "agents" / name / record["policy"] for name, record in result["agents"].items()}
+    policies = trained_policies(dirs, SPEC, greedy=False)
+    trained_on = {world_key(w) for w in per_world(load_influenced_worlds(influence_dir, SPEC)[0])}
+    failed = result["failed_training"]
+    per_seed: dict[str, dict[str, dict]] = {"default": {}, "influenced": {}}
+    sets = {}
+    with RunStore(influence_dir) as store, RunStore(influence_dir / "heldout") as held:
+        for i, source in enumerate(seeds):
+            target, name = seeds[(i + 1) % len(seeds)], f"default-s{source}"
+            found = store.evaluations(eval_campaign(name, result))
+            worlds = decoded(setup.generator, [e.latent for e, hit in zip(found, selection.mask(found)) if hit]) if found else []
+            from_eval = len(worlds)
+            if search_budget > 0:
+                atlas_name = f"heldout-atlas-{name}"
+                experiments.atlas(
+                    held,
+                    dataclasses.replace(setup, policy=policies[name]),
+                    metric,
+                    maximize=search_direction(selection, np.zeros(0)),
+                    budget=search_budget,
+                    seed=HELDOUT_SEED + source,  # not the influence search's seed: other worlds than it tried
+                    failure=selection_text,
+                    name=atlas_name,
+                    progress=progress,
+                )
+                searched = held.evaluations(atlas_name, with_worlds=True)
+                worlds += [e.world for e, hit in zip(searched, selection.mask(searched)) if hit and e.world is not None]
+            unique = {world_key(w): w for w in worlds}
+            kept = [w for key, w in unique.items() if key not in trained_on]
+            sets[str(target)] = {
+                "source_seed": source,
+                "from_evaluation_worlds": from_eval,
+                "from_search": len(worlds) - from_eval,
+                "distinct": len(unique),
+                "dropped_trained_on": len(unique) - len(kept),
+                "worlds": len(kept),
+                "source_failed_training": name in failed,
+            }
+            if not kept:
+                continue
+            batch, key = SPEC.stack_worlds(kept), jax.random.key(HELDOUT_SEED + source)
+            for label in per_seed:
+                metrics = SPEC.metrics.with_derived(
+                    evaluate(setup.env, policies[f"{label}-s{target}"], batch, REPEATS, key, setup.params), setup.params
+                )
+                per_seed[label][str(target)] = episode_summary(metrics)
+    metrics = ("crash_rate", "lap_rate", "normalised_return", "return", "steps_per_lap")
+    summary = summary_over_seeds(per_seed, metrics)
+    clean = [t for t, about in sets.items() if not about["source_failed_training"] and not {f"default-s{t}", f"influenced-s{t}"} & set(failed)]
+    trained = {label: {t: row for t, row in rows.items() if t in clean} for label, rows in per_seed.items()}
+    summary_trained = summary_over_seeds(trained, metrics)
+    return {
+        "selection": selection_text,
+        "search_budget": search_budget,
+        "repeats": REPEATS,
+        "pairs": "seed k's default agent's failing worlds -> seed k+1's (mod n) agents",
+        "sets": sets,
+        "per_seed": per_seed,
+        "summary": summary,
+        "intervals": comparison(summary),
+        "without_failed_training": {"seeds": clean, "summary": summary_trained, "intervals": comparison(summary_trained)},
+    }
+
+
+def slug(text: str) -> str:
+    """A selection's text as a file-name part."""
+    return re.sub(r"[^a-z0-9.]+", "-", text.lower()).strip("-")
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--algo", choices=SPEC.algorithms, default="acktr", help="the paper's: acktr")
+    parser.add_argument(
+        "--regime", choices=list(regimes()), default="ours", help="the training regime (benchmarks/racing_regime.py); ours: the spec's"
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    parser.add_argument("--episodes", type=int, default=PAPER["episodes"], help="training episodes of every agent (paper: 10,000)")
+    parser.add_argument(
+        "--episodes", type=int, default=None, help="scale the regime's budget: a 10,000-episode regime (the paper's) trains this many"
+    )
     parser.add_argument("--candidates", type=int, default=PAPER["influence_candidates"])
     parser.add_argument("--atlas-budget", type=int, default=2100, help="worlds of the crash-maximising atlas of step 3")
     parser.add_argument("--search-budget", type=int, default=2100, help="worlds of the influence candidate search (CMA-ME atlas)")
     parser.add_argument(
-        "--selection", default="auto", help=f"auto: {PAPER_SELECTION!r} if it holds {MIN_DISTINCT} distinct tracks, else {FALLBACK_SELECTION!r}"
+        "--selection",
+        default="auto",
+        help=f"paper: {PAPER_SELECTION!r}; ours: {OUR_SELECTION!r}; auto: {PAPER_SELECTION!r} if it holds {MIN_DISTINCT} distinct tracks, "
+        f"else {FALLBACK_SELECTION!r}; or a selection's text",
     )
+    parser.add_argument("--heldout", choices=("auto", "on", "off"), default="auto", help="step 6 (auto: with --selection ours)")
+    parser.add_argument("--heldout-search-budget", type=int, default=420, help="worlds of each default agent's atlas toward the selection (step 6)")
     parser.add_argument("--eval-worlds", type=int, default=1000)
     parser.add_argument("--generator", type=Path, default=Path("runs/generators/racing"))
     parser.add_argument("--work", type=Path, default=Path("runs/influence-racing"))
+    parser.add_argument(
+        "--results", type=Path, default=None, help="the result file (default under benchmarks/results/, named by regime and selection)"
+    )
     parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     progress, started = not args.quiet, time.perf_counter()
-    args.work.mkdir(parents=True, exist_ok=True)
+    regime = regimes()[args.regime]
+    if args.algo != "acktr" and regime.overrides:
+        parser.error(f"--regime {regime.name} sets ACKTR settings; use --algo acktr or --regime ours")
+    if args.episodes is not None and args.episodes < 1:
+        parser.error("--episodes must be at least 1")
+    episodes = regime.budget(args.episodes)
+    config = regime.config(args.episodes, args.algo)
+    default_run = regime.name == "ours" and args.episodes is None
+    base = args.work if default_run else args.work / f"regime-{regime.name}-e{episodes}"
+    base.mkdir(parents=True, exist_ok=True)
     gen_dir = generator_dir(args.work, args.generator, progress)
-    agent_dir = given_agent(args.work, args.algo, args.episodes, progress)
+    agent_dir = given_agent(base, args.algo, config, progress)
     setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=OPTIONS)
-    reach = paper_selection_reach(args.work, setup, args.candidates, args.atlas_budget, progress)
+    reach = paper_selection_reach(base, setup, args.candidates, args.atlas_budget, progress)
     reach["dataset_census"] = dataset_census(gen_dir, setup, setup.repeats)
     enough = reach["random"]["distinct"] + reach["atlas"]["distinct"] >= MIN_DISTINCT  # an upper bound: the two may share tracks
-    selection = args.selection if args.selection != "auto" else (PAPER_SELECTION if enough else FALLBACK_SELECTION)
-    influence_dir = args.work / f"influence-{args.algo}"
-    config = training_config(SPEC, args.algo, args.episodes, options=OPTIONS)
+    if args.selection == "auto":
+        selection = PAPER_SELECTION if enough else FALLBACK_SELECTION
+    else:
+        selection = SELECTIONS.get(args.selection, args.selection)
+    tag = "" if args.selection == "auto" else "-" + (args.selection if args.selection in SELECTIONS else slug(selection))
+    influence_dir = base / f"influence-{args.algo}{tag}"
     result = experiments.influence(
         influence_dir,
         setup,
         selection,
         algo=args.algo,
-        episodes=args.episodes,
+        episodes=episodes,
         seeds=tuple(args.seeds),
         candidates=args.candidates,
         search_budget=args.search_budget,
@@ -194,27 +351,36 @@ def main(argv=None) -> dict:
         for label, runs in result["per_seed"].items()
     }
     summary_trained = summarise(trained, list(result["summary"]))
+    heldout = args.heldout == "on" or (args.heldout == "auto" and selection == OUR_SELECTION)
+    held = heldout_evaluation(influence_dir, setup, result, selection, args.heldout_search_budget, progress) if heldout else None
+    given_why = SPEC.training_check({"lap_completed": reach["given_agent"]["lap_rate"]})
+    failed_training = {**({"given-s0": given_why} if given_why else {}), **result["failed_training"]}
     reward = summary["return"]
     figures = {
         "command": "python benchmarks/influence_racing.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "algo": args.algo,
         "options": OPTIONS,
+        "regime": regime.record(args.episodes, args.algo),
         "settings": SPEC.option_overrides(args.algo, SPEC.check_options(OPTIONS)),
         "budgets": {
-            "episodes": args.episodes,
+            "episodes": episodes,
             "seeds": args.seeds,
             "candidates": args.candidates,
             "atlas_budget": args.atlas_budget,
             "search_budget": args.search_budget,
             "eval_worlds": args.eval_worlds,
             "repeats": setup.repeats,
+            "heldout_search_budget": args.heldout_search_budget if heldout else None,
         },
+        "given_agent": reach["given_agent"],
         "paper_selection_reach": reach,
         "selection": {
             **result["selection"],
             "chosen_by": args.selection,
             "distinct_selected_tracks": selected["distinct"],
             "selected_worlds": selected["meeting"],
+            "meets_min_distinct": selected["distinct"] >= MIN_DISTINCT,
+            "min_distinct": MIN_DISTINCT,
         },
         "worlds": result["worlds"],
         "per_seed": {**result["per_seed"], "steps_per_lap": speed},
@@ -222,7 +388,8 @@ def main(argv=None) -> dict:
         "intervals": comparison(summary),
         "without_failed_training": {"summary": summary_trained, "intervals": comparison(summary_trained)},
         "reward_change_pct": round(100 * (reward["influenced"]["mean"] / reward["default"]["mean"] - 1), 2),
-        "failed_training": result["failed_training"],
+        "heldout": held,
+        "failed_training": failed_training,
         "paper": {
             "crashed": {"default": 0.11, "influenced": 0.04},
             "reward_change_pct": -5.0,
@@ -231,12 +398,16 @@ def main(argv=None) -> dict:
         "generator": str(gen_dir),
         "wall_seconds": round(time.perf_counter() - started, 1),
         "influence_wall_seconds": result["wall_seconds"],
-        "work": str(args.work),
+        "work": str(base),
     }
     machine = describe_machine()
     payload = {"benchmark": "influence-racing", "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": machine, **figures}
-    path = write_text(RESULTS / "influence-racing.json", json.dumps(payload, indent=2, default=float) + "\n")
+    name = "influence-racing.json" if default_run and args.selection == "auto" else f"influence-racing-{regime.name}-e{episodes}{tag or '-auto'}.json"
+    path = write_text(args.results or RESULTS / name, json.dumps(json_safe(payload), indent=2, default=float) + "\n")
+    own = reach["given_agent"]
     lines = [
+        f"regime {regime.name} ({episodes} episodes): given agent crash {own['crash_rate']:.4f}, lap {own['lap_rate']:.4f}"
+        f"{' (in the paper window)' if own['in_paper_window'] else ''}",
         f"paper selection: {reach['random']['distinct']} distinct of {args.candidates} random, {reach['atlas']['distinct']} in a {args.atlas_budget}-world atlas",
         f"{selected['distinct']} distinct tracks selected ({selection}); {machine['cores']} cores",
     ]
@@ -245,6 +416,12 @@ def main(argv=None) -> dict:
         lines.append(
             f"{metric}: {d['mean']:.4f} ± {d['ci95']:.4f} -> {i['mean']:.4f} ± {i['ci95']:.4f} (overlap: {figures['intervals'][metric]['overlap']})"
         )
+    if held and "summary" in held:
+        for metric in ("crash_rate", "lap_rate"):
+            d, i = held["summary"][metric]["default"], held["summary"][metric]["influenced"]
+            lines.append(f"held out {metric}: {d['mean']:.4f} ± {d['ci95']:.4f} -> {i['mean']:.4f} ± {i['ci95']:.4f} ({d['seeds']} seeds)")
+    if failed_training:
+        lines.append("failed training: " + ", ".join(failed_training))
     print("\n".join(lines) + f"\nrecorded in {path}")
     return figures
 

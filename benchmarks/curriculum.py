@@ -16,7 +16,7 @@ worlds z ~ N(0, I) (their own seed) ``--repeats`` times, and we report per agent
   exact (Clopper-Pearson) interval: Monte Carlo over the evaluation worlds;
 - ``worst``: the worst world's main metric among them (a random search of ``--eval-worlds``;
   a fixed-budget atlas per agent was not run);
-- the training wall time of each arm (its seeds together).
+- the training wall time of each arm (its seeds together, from the runs' curves: resumes add up).
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
 ``dr``'s. Every step is cached under ``--work``: a killed run resumes. Writes
@@ -26,6 +26,7 @@ Across seeds: means with 95% Student-t intervals, and whether each arm's interva
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import sys
 import time
@@ -54,6 +55,7 @@ from worldagent.search.objectives import generate  # noqa: E402
 EVAL_SEED = 20_251_126  # the evaluation worlds' own stream, apart from every training seed
 ALPHA = 0.10
 STATS = ("mean", "cvar10", "p_failure", "worst")
+SECONDS_KEY = "_evaluation_seconds"  # kept in each agent's evaluation cache beside its metrics
 NOT_RUN = {
     "rounds arm": "`influence --rounds 3` is not an arm yet",
     "atlas worst world": "the worst world is the worst of the evaluation worlds (a random search), not a fixed-budget atlas per agent",
@@ -70,12 +72,35 @@ def paper_defaults(spec) -> dict:
     }
 
 
+def trained_before(out_dir: Path, config, described: str) -> dict | None:
+    """{episodes, wall_seconds} of a run this benchmark trained to its budget before, read from its
+    run.json, saved agent and curve, not its checkpoint (which a later change to the env's state
+    would no longer restore); None when it is not finished or was trained otherwise."""
+    files = {name: out_dir / name for name in ("run.json", "curve.csv", "policy/policy.json")}
+    if not all(path.is_file() for path in files.values()):
+        return None
+    record = json.loads(files["run.json"].read_text())
+    if record.get("config") != json.loads(json.dumps(config.to_dict())) or record.get("distribution") != described:
+        return None
+    with open(files["curve.csv"], newline="") as handle:
+        last = list(csv.DictReader(handle))[-1]
+    episodes = int(float(last["episodes"]))
+    return {"episodes": episodes, "wall_seconds": float(last["wall_seconds"])} if episodes >= config.episodes else None
+
+
 def train_arm(spec, algo, config, options, curriculum, seeds, work: Path, progress: bool) -> dict:
-    """Train one arm's seeds as one program (resumable); its agents' directories and wall seconds."""
-    runs = [ManyRun(work / f"s{seed}", seed=seed, distribution=curriculum, distribution_spec=label(curriculum)) for seed in seeds]
-    start = time.perf_counter()
+    """Train one arm's seeds as one program (resumable); its agents' directories, episodes and wall seconds."""
+    described = label(curriculum)
+    runs = [ManyRun(work / f"s{seed}", seed=seed, distribution=curriculum, distribution_spec=described) for seed in seeds]
+    done = [trained_before(run.out_dir, config, described) for run in runs]
+    if all(done):
+        return {
+            "dirs": [str(run.out_dir) for run in runs],
+            "wall_seconds": max(d["wall_seconds"] for d in done),
+            "episodes": [d["episodes"] for d in done],
+        }
     results = train_many(spec, algo, config, runs, options=options, progress=progress)
-    wall = time.perf_counter() - start
+    wall = max(float(r.curve["wall_seconds"][-1]) for r in results)  # the curves' clock: the whole training across resumes
     return {"dirs": [str(r.out_dir) for r in results], "wall_seconds": round(wall, 1), "episodes": [r.episodes for r in results]}
 
 
@@ -117,17 +142,22 @@ def evaluation_worlds(generator, count: int):
     return np.asarray(z), generate(generator, z)
 
 
-def evaluate_agent(spec, agent_dir: str, generator_dir: Path, worlds, repeats: int, cache: Path) -> dict[str, np.ndarray]:
-    """{metric: f64[B, R]} of the agent on the evaluation worlds (cached)."""
+def evaluate_agent(spec, agent_dir: str, generator_dir: Path, worlds, repeats: int, cache: Path) -> tuple[dict[str, np.ndarray], float | None]:
+    """({metric: f64[B, R]} of the agent on the evaluation worlds, the seconds that took), cached
+    (seconds None for a cache written before they were kept)."""
     if cache.is_file():
-        return dict(np.load(cache))
+        stored = dict(np.load(cache))
+        seconds = stored.pop(SECONDS_KEY, None)
+        return stored, None if seconds is None else float(seconds)
+    clock = time.perf_counter()
     setup = experiments.setup(spec.name, agent_dir, str(generator_dir), repeats=repeats)
     metrics = evaluate(setup.env, setup.policy, worlds, repeats, jax.random.key(EVAL_SEED + 1), setup.params)
     metrics = {name: np.asarray(value, np.float64) for name, value in spec.metrics.with_derived(metrics, setup.params).items()}
+    seconds = time.perf_counter() - clock
     cache.parent.mkdir(parents=True, exist_ok=True)
     with open(cache, "wb") as handle:
-        np.savez(handle, **metrics)
-    return metrics
+        np.savez(handle, **metrics, **{SECONDS_KEY: np.float64(seconds)})
+    return metrics, seconds
 
 
 def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
@@ -185,6 +215,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--eval-worlds", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=8)
     parser.add_argument("--work", type=Path, default=None)
+    parser.add_argument("--note", action="append", default=[], help="a sentence the JSON keeps (e.g. what else ran on the machine)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
 
@@ -220,13 +251,14 @@ def main(argv=None) -> dict:
             trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
             arms[arm] = {"curriculum": label(curriculum), **trained}
         if "dirs" in arms[arm]:
-            clock = time.perf_counter()
-            per_seed[arm] = {}
+            per_seed[arm], seconds = {}, []
             for seed, agent_dir in zip(args.seeds, arms[arm]["dirs"]):
                 cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
-                per_seed[arm][seed] = agent_statistics(spec, evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, cache), params)
+                metrics, took = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, cache)
+                per_seed[arm][seed] = agent_statistics(spec, metrics, params)
+                seconds.append(took)
                 print(arm, seed, {k: round(v, 4) if isinstance(v, float) else v for k, v in per_seed[arm][seed].items()}, flush=True)
-            arms[arm]["evaluation_wall_seconds"] = round(time.perf_counter() - clock, 1)
+            arms[arm]["evaluation_wall_seconds"] = None if None in seconds else round(sum(seconds), 1)  # None: cached before kept
         result = {
             "env": spec.name,
             "algorithm": algo,
@@ -243,6 +275,7 @@ def main(argv=None) -> dict:
             "per_seed": per_seed,
             "summary": compare(per_seed),
             "not_run": NOT_RUN,
+            "notes": args.note,
             "machine": describe_machine(),
             "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),
         }

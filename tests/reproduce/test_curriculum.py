@@ -39,7 +39,9 @@ def test_a_curriculum_is_part_of_the_agent_phases_config():
     assert target.curriculum_of("racing")["target"] == "crash_rate > 0.5" and target.curriculum_of("harvest")["target"] == "group_reward < 50"
     metric = TINY.with_curriculum("accel", "conflict", False)
     assert metric.curriculum_of("harvest") == {"name": "accel", "settings": {}, "target": "conflict", "maximize": False}
-    metric.check_curriculum("harvest")
+    assert "never replays" in metric.check_curriculum("harvest")  # the papers' 4,000 latents in a 4-episode budget: said
+    assert TINY.with_curriculum("plr", settings={"buffer_size": 8}).check_curriculum("racing") is None  # 4 of 64 episodes
+    assert TINY.check_curriculum("racing") is None  # dr
     # an adaptive curriculum draws G(z): redoing the generator redoes the agents (not so for dr)
     assert "agent" in restart_closure(["generator"], curriculum=True) and "agent" not in restart_closure(["generator"])
 

@@ -63,13 +63,15 @@ def reproduce(
         The manifest as it stands at the end.
     """
     out = Path(out)
-    for env in envs:
-        preset.check_curriculum(env)  # refused in one line before anything is read or written
+    late = {env: preset.check_curriculum(env) for env in envs}  # refused in one line before anything is read or written
     manifest = Manifest.open(out)
     redo = restart_closure(restart, adaptive(preset, envs))
     for env in envs:
         forget_phases(manifest, EnvContext(out, env, preset), redo)
     check_configs(manifest, preset, envs)
+    for env, warning in late.items():  # once the run is sure to go on
+        if warning:
+            echo(f"{env}: {warning}")
     out.mkdir(parents=True, exist_ok=True)
     manifest.begin_run(preset.name, preset.to_dict(), envs)
     for env in envs:

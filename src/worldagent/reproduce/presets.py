@@ -235,11 +235,15 @@ class Preset:
             **({"maximize": chosen.maximize} if chosen.maximize is not None else {}),
         }
 
-    def check_curriculum(self, env: str) -> None:
-        """Refuse, in one line and before any work, a curriculum ``worldagent train`` would refuse for ``env``."""
+    def check_curriculum(self, env: str) -> str | None:
+        """Refuse, in one line and before any work, a curriculum ``worldagent train`` would refuse for ``env``;
+        returns ``train``'s warning when its buffer cannot start replaying early in ``env``'s budget, else None."""
+        from worldagent.curricula import late_replay_warning
+
         request = self.curriculum_of(env)
-        if request is not None:
-            make_curriculum_of(env, request, None)
+        if request is None:
+            return None
+        return late_replay_warning(make_curriculum_of(env, request, None), self.budgets(env).episodes)
 
     def settings_of(self, env: str) -> dict[str, Any]:
         """The config fields ``--set`` gives ``env``'s agents (those of its algorithm)."""

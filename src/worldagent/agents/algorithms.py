@@ -34,18 +34,20 @@ class Algorithm:
         make_train: ``make_train(config, env, env_params, distribution, training_params=None) ->
             trainer.Trainer`` (``training_params``: the env's ``EnvSpec.training_params``).
         network_kind: the saved agent's architecture name (``networks.NETWORKS``).
+        learning_potential: what a curriculum's buffer scores its episodes by (``curricula``).
     """
 
     name: str
     config_type: type
     make_train: Callable
     network_kind: str
+    learning_potential: str
 
 
 ALGORITHMS: dict[str, Algorithm] = {
-    "ppo": Algorithm("ppo", ppo.PPOConfig, ppo.make_train, "actor_critic"),
-    "acktr": Algorithm("acktr", acktr.ACKTRConfig, acktr.make_train, "actor_critic"),
-    "dqn": Algorithm("dqn", dqn.DQNConfig, dqn.make_train, "q_network"),
+    "ppo": Algorithm("ppo", ppo.PPOConfig, ppo.make_train, "actor_critic", "positive value loss"),
+    "acktr": Algorithm("acktr", acktr.ACKTRConfig, acktr.make_train, "actor_critic", "positive value loss"),
+    "dqn": Algorithm("dqn", dqn.DQNConfig, dqn.make_train, "q_network", "|TD error|"),
 }
 
 

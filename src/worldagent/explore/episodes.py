@@ -74,6 +74,7 @@ def marked_trace(trace, marks, env):
 
 
 _LAYOUTS: dict = {}
+LAYOUTS_KEPT = 16
 
 
 def mark_layout(trace, marks, env, world: Any, params: Any) -> tuple:
@@ -83,6 +84,8 @@ def mark_layout(trace, marks, env, world: Any, params: Any) -> tuple:
 
     key = (trace, marks, env, tuple((np.shape(leaf), np.asarray(leaf).dtype.str) for leaf in jax.tree_util.tree_leaves(world)))
     if key not in _LAYOUTS:
+        if len(_LAYOUTS) >= LAYOUTS_KEPT:  # a long-lived server sees many worlds' shapes: keep the last few
+            _LAYOUTS.clear()
 
         def shapes(world, params):
             _, state = env.reset(jax.random.key(0), world, params)

@@ -133,6 +133,7 @@ def curriculum_section(run: Any, results: dict) -> str:
 
 
 def _curriculum_block(run: Any, env: str, res: dict, found: dict) -> str:
+    from worldagent.agents.algorithms import get_algorithm
     from worldagent.envs import registry
     from worldagent.reports.page import esc, image, missing
 
@@ -145,7 +146,7 @@ def _curriculum_block(run: Any, env: str, res: dict, found: dict) -> str:
             "G(z) as the agent learns, run reproduce with <code>--curriculum plr</code> (or accel, target; docs/curriculum.md).</p>"
         )
     target, algo = request.get("target"), res["phases"]["agent"].get("config", {}).get("algo")
-    potential = "|TD error|" if algo == "dqn" else "positive value loss"
+    potential = get_algorithm(algo).learning_potential
     direction = {True: " (maximize)", False: " (minimize)"}.get(request.get("maximize"), "")
     scored = f"learning potential ({potential})" if target is None else f"the margin of the target <code>{esc(target)}</code>{direction}"
     text = (

@@ -39,8 +39,9 @@ def test_generator_is_repair_of_the_decoded_logits(harvest_generator):
 
 
 def test_racing_generator_returns_dataset_tracks(racing_generator, racing_data):
-    assert isinstance(racing_generator.repair, NearestWorld)
-    z = jax.random.normal(jax.random.key(3), (8, racing_generator.latent_dim))
+    """G picks behind the decoder's last layer (``folded``) the very tracks the repair picks from the logits."""
+    assert isinstance(racing_generator.repair, NearestWorld) and racing_generator.folded is not None
+    z = 2 * jax.random.normal(jax.random.key(3), (64, racing_generator.latent_dim))
     index = np.asarray(racing_generator.repair.indices(racing_generator.logits(z)))
     tracks = racing_generator(z)
     np.testing.assert_array_equal(np.asarray(tracks.centreline), racing_data.worlds.centreline[index])

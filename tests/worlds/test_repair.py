@@ -44,6 +44,20 @@ def test_nearest_world_returns_the_dataset_worlds_under_jit(racing_data):
     assert nearest.config == {} and NearestWorld.from_dataset(subset, nearest.config).cells.shape == (32, 64 * 64)
 
 
+def test_folded_behind_a_linear_layer_the_repair_picks_the_same_worlds(racing_data):
+    """``fold``: [h, 1] against the folded rows picks what h @ kernel + bias picks against the cells;
+    the bias alone (a zero kernel) decides between tracks of different sizes."""
+    repair = NearestWorld.from_dataset(racing_data)
+    key_h, key_w, key_b = jax.random.split(jax.random.key(5), 3)
+    hidden = jax.nn.relu(jax.random.normal(key_h, (32, 24)))
+    cells = racing_data.cells.shape[1]
+    weights = jax.random.normal(key_w, (24, cells))
+    for kernel, bias in ((weights, 2.0 * jax.random.normal(key_b, (cells,))), (0 * weights, jnp.linspace(-1, 1, cells))):
+        folded = repair.fold(kernel, bias)
+        augmented = jnp.concatenate([hidden, jnp.ones((32, 1))], axis=1)
+        np.testing.assert_array_equal(folded.indices(augmented), repair.indices(hidden @ kernel + bias))
+
+
 def test_harvest_repair_from_a_dataset(harvest_data):
     default = HarvestRepair.from_dataset(harvest_data, {})
     median = int(np.median(harvest_data.worlds.apples.reshape(len(harvest_data), -1).sum(1)))

@@ -31,7 +31,7 @@ from worldagent.envs.core import check_finite
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.worlds.dataset import WorldDataset
-from worldagent.worlds.vae import VAE, TrainedVAE
+from worldagent.worlds.vae import VAE, TrainedVAE, logits_layer
 
 GENERATOR_FILE = "generator.json"
 
@@ -47,6 +47,9 @@ class Generator:
         model: the ``VAE`` module (static).
         env: the environment's registered name (static).
         cell_shape: shape of one world's cells (static).
+        folded: the repair moved behind the decoder's last layer where it allows it (``repair.fold``,
+            e.g. a nearest-world repair, which is linear in the logits): the same worlds, fewer
+            products. None: G decodes logits, then repairs them.
     """
 
     params: Any
@@ -54,6 +57,7 @@ class Generator:
     model: VAE = struct.field(pytree_node=False)
     env: str = struct.field(pytree_node=False)
     cell_shape: tuple = struct.field(pytree_node=False)
+    folded: Any = None
 
     @property
     def latent_dim(self) -> int:
@@ -78,7 +82,11 @@ class Generator:
 
     def __call__(self, z: jax.Array) -> Any:
         """A batch of B valid worlds for latents z f[B, latent_dim] (paper Equation 3)."""
-        return self.repair(self.logits(z))
+        if self.folded is None:
+            return self.repair(self.logits(z))
+        self.check_latents(z)
+        hidden = self.model.apply({"params": self.params}, jnp.asarray(z, jnp.float32), method=VAE.hidden)
+        return self.folded(jnp.concatenate([hidden, jnp.ones((len(hidden), 1), hidden.dtype)], axis=1))
 
 
 def _repair_config(meta: Mapping[str, Any]) -> dict:
@@ -126,7 +134,8 @@ def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mappi
             "pass the dataset it was trained on."
         )
     repair = repair if repair is not None else make_repair(dataset, repair_config)
-    return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape))
+    folded = repair.fold(*logits_layer(vae.params)) if hasattr(repair, "fold") else None
+    return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape), folded)
 
 
 def save_generator(directory: Path | str, vae: TrainedVAE, dataset_path: Path | str, generator: Generator) -> Path:

@@ -93,17 +93,27 @@ class VAE(nn.Module):
             h = nn.relu(layer(h))
         return self.to_mean(h), self.to_log_var(h)
 
-    def decode(self, z: jax.Array) -> jax.Array:
-        """f[B, L] latents -> f32[B, D] Bernoulli logits of the cells."""
+    def hidden(self, z: jax.Array) -> jax.Array:
+        """f[B, L] latents -> f32[B, H] the decoder's last hidden layer (its logits are linear in it)."""
         h = z
         for layer in self.decoder_layers:
             h = nn.relu(layer(h))
-        return self.to_logits(h)
+        return h
+
+    def decode(self, z: jax.Array) -> jax.Array:
+        """f[B, L] latents -> f32[B, D] Bernoulli logits of the cells."""
+        return self.to_logits(self.hidden(z))
 
     def __call__(self, cells: jax.Array, key: jax.Array):
         mean, log_var = self.encode(cells)
         z = mean + jnp.exp(0.5 * log_var) * jax.random.normal(key, mean.shape)
         return self.decode(z), mean, log_var
+
+
+def logits_layer(params) -> tuple[jax.Array, jax.Array]:
+    """(kernel f32[H, D], bias f32[D]) of the decoder's last layer: logits = hidden(z) @ kernel + bias."""
+    layer = params["to_logits"]
+    return layer["kernel"], layer["bias"]
 
 
 def make_vae(cell_count: int, config: VAEConfig) -> VAE:

@@ -7,15 +7,21 @@
 Every arm trains the same algorithm, config and episode budget on G(z) of the same generator;
 only the curriculum differs (``dr``: z ~ N(0, I); ``plr``, ``accel``; ``target``: toward
 ``--target``, by default the env's failure event). The seeds of an arm train as one program
-(``agents.many.train_many``). Every final agent then plays the same ``--eval-worlds`` fresh
-worlds z ~ N(0, I) (their own seed) ``--repeats`` times, and we report per agent:
+(``agents.many.train_many``). Two arms are the paper's influence (``experiments.influence``,
+whose default agents are the ``dr`` arm's, linked rather than trained again): ``offline``, its
+one retrain on the worlds where dr's first agent shows the env's selection, and ``rounds``,
+the phases iterated (``--rounds``, each round's agents searching and retraining again).
+
+Every final agent then plays the same ``--eval-worlds`` fresh worlds z ~ N(0, I) (their own
+seed) ``--repeats`` times, and we report per agent:
 
 - ``mean``: the mean over worlds of the main metric (normalised to [0, 1] where the env has bounds);
 - ``cvar10``: the α-CVaR at 10%, the mean over the worst 10% of those worlds (Rutherford et al. 2024);
 - ``p_failure``: the share of worlds where the env's failure event holds (world means), with its
   exact (Clopper-Pearson) interval: Monte Carlo over the evaluation worlds;
-- ``worst``: the worst world's main metric among them (a random search of ``--eval-worlds``;
-  a fixed-budget atlas per agent was not run);
+- ``worst``: the worst world's main metric among them (a random search of ``--eval-worlds``);
+- ``atlas_worst``: the worst world a fixed-budget failure atlas (CMA-ME, ``--atlas-budget``
+  worlds, the same seed for every agent) finds on the agent;
 - the training wall time of each arm (its seeds together, from the runs' curves: resumes add up).
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
@@ -45,21 +51,21 @@ from worldagent.analysis.intervals import clopper_pearson  # noqa: E402
 from worldagent.curricula import label, make_curriculum, parse_curriculum_settings  # noqa: E402
 from worldagent.curricula.scores import target_score  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
+from worldagent.errors import WorldagentError  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.events import parse_selection  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
+from worldagent.influence.cache import TRAINED_FILE  # noqa: E402
 from worldagent.influence.experiment import compared_metrics  # noqa: E402
 from worldagent.influence.statistics import mean_and_ci  # noqa: E402
 from worldagent.search.objectives import generate  # noqa: E402
+from worldagent.store import RunStore  # noqa: E402
 
 EVAL_SEED = 20_251_126  # the evaluation worlds' own stream, apart from every training seed
 ALPHA = 0.10
-STATS = ("mean", "cvar10", "p_failure", "worst")
+STATS = ("mean", "cvar10", "p_failure", "worst", "atlas_worst")
 SECONDS_KEY = "_evaluation_seconds"  # kept in each agent's evaluation cache beside its metrics
-NOT_RUN = {
-    "rounds arm": "`influence --rounds 3` is not an arm yet",
-    "atlas worst world": "the worst world is the worst of the evaluation worlds (a random search), not a fixed-budget atlas per agent",
-}
+INFLUENCE_ARMS = ("offline", "rounds")
 
 
 def paper_defaults(spec) -> dict:
@@ -104,36 +110,68 @@ def train_arm(spec, algo, config, options, curriculum, seeds, work: Path, progre
     return {"dirs": [str(r.out_dir) for r in results], "wall_seconds": round(wall, 1), "episodes": [r.episodes for r in results]}
 
 
-def offline_arm(
-    spec, algo, config, options, generator, generator_dir: Path, policy_dir: str, seeds, work: Path, counts: dict, progress: bool
-) -> dict:
-    """The paper's influence (§6.2), offline: the first seed's ``dr`` agent plays ``counts["candidates"]``
-    random worlds and a CMA-ES search of ``counts["search_budget"]`` more (8 episodes each); the worlds
-    with the env's selection become the pool every seed's agent trains on from scratch."""
-    from worldagent.agents.distributions import WorldPool
-    from worldagent.influence.experiment import find_worlds
-    from worldagent.influence.worlds import resolved
-    from worldagent.store import RunStore
+def link_default_agents(run_dir: Path, dr_dirs: list[str], seeds) -> None:
+    """Make the ``dr`` arm's agents the influence experiment's default agents: the same algorithm,
+    config, G(z) and seeds, so training them again would only repeat them."""
+    for seed, trained in zip(seeds, dr_dirs):
+        link = run_dir / "agents" / f"default-s{seed}"
+        if not link.exists():
+            link.parent.mkdir(parents=True, exist_ok=True)
+            link.symlink_to(Path(trained).resolve(), target_is_directory=True)
+        if not (link / TRAINED_FILE).is_file():
+            with open(link / "curve.csv", newline="") as handle:
+                last = list(csv.DictReader(handle))[-1]
+            record = {"policy": "policy", "episodes": int(float(last["episodes"])), "env_steps": int(float(last["env_steps"]))}
+            record |= {"wall_seconds": float(last["wall_seconds"]), "seed": int(seed), "distribution": "G(z), z ~ N(0, I) (the dr arm's agent)"}
+            write_text(link / TRAINED_FILE, json.dumps(record, indent=1))
 
-    selection = resolved(spec.selection, spec)
-    setup = experiments.setup(spec.name, policy_dir, str(generator_dir), repeats=counts["repeats"])
-    work.mkdir(parents=True, exist_ok=True)
-    clock = time.perf_counter()
-    with RunStore(work) as store:
-        tried, _, worlds, latents, _, _ = find_worlds(store, spec, setup.env, setup.params, setup.policy, generator, selection, counts, progress)
-    search_wall = time.perf_counter() - clock
-    if len(latents) == 0:  # nothing to retrain on: said, and the other arms go on
-        return {
-            "not_run": f"none of the {len(tried)} worlds the s{seeds[0]} dr agent played has {selection.describe()}",
-            "search_wall_seconds": round(search_wall, 1),
-        }
-    trained = train_arm(spec, algo, config, options, WorldPool.create(worlds), seeds, work, progress)
+
+def round_seconds(work: Path, r: int, seeds) -> tuple[float, float]:
+    """(search, training) seconds of influence round ``r``. Training: the slowest agent's curve clock
+    (resumes add up). Search: as its ``influence.json`` first said, kept in ``search-seconds.json``,
+    since a rerun reads the campaigns back and writes ~0 there."""
+    here = work if r == 1 else work / f"round-{r}"
+    kept_file = work / "search-seconds.json"
+    kept = json.loads(kept_file.read_text()) if kept_file.is_file() else {}
+    if str(r) not in kept:
+        walls = json.loads((here / "influence.json").read_text())["wall_seconds"]
+        kept[str(r)] = walls.get("candidates", 0.0) + walls.get("search", 0.0)
+        write_text(kept_file, json.dumps(kept, indent=1))
+    return kept[str(r)], max(curve_seconds(here / "agents" / f"influenced-s{seed}") for seed in seeds)
+
+
+def curve_seconds(run_dir: Path) -> float:
+    """The wall clock of a run's learning curve at its last update (resumes add up)."""
+    with open(run_dir / "curve.csv", newline="") as handle:
+        return float(list(csv.DictReader(handle))[-1]["wall_seconds"])
+
+
+def influence_arm(spec, algo, config, generator, dr_dirs: list[str], seeds, work: Path, counts: dict, rounds: int, progress: bool) -> dict:
+    """The paper's influence (§6.2) over ``rounds`` rounds: dr's first agent plays ``counts["candidates"]``
+    random worlds and a CMA-ES search of ``counts["search_budget"]`` more; every seed retrains from
+    scratch on the worlds with the env's selection; each later round searches with that seed's
+    last agent, adds what it selects, and retrains (``influence.rounds``). Round 1 is ``offline``."""
+    link_default_agents(work, dr_dirs, seeds)
+    setup = experiments.setup(spec.name, dr_dirs[0], generator, repeats=counts["repeats"])
+    try:
+        result = experiments.influence(
+            work, setup, spec.selection, algo=algo, episodes=config.episodes, seeds=seeds, candidates=counts["candidates"],
+            search_budget=counts["search_budget"], eval_worlds=counts["eval_worlds"], config=config, seed=0, progress=progress,
+            runs_per_program=len(seeds), rounds=rounds,
+        )  # fmt: skip
+    except WorldagentError as error:  # e.g. no world with the selection: said, and the other arms go on
+        return {"not_run": str(error), "rounds": rounds}
+    here = work if rounds == 1 else work / f"round-{rounds}"
+    search, train = zip(*(round_seconds(work, r, seeds) for r in range(1, rounds + 1)))
     return {
-        **trained,
-        "curriculum": f"pool of {len(latents)} worlds with {selection.describe()} (of {len(tried)} tried by the s{seeds[0]} dr agent)",
-        "search_wall_seconds": round(search_wall, 1),
-        "search_episodes": len(tried) * counts["repeats"],
-        "training_episodes_before": "the selecting dr agent's training (the dr arm's first seed)",
+        "curriculum": f"influence, {rounds} round(s): {result['worlds']['selected']} worlds with {result['selection']['describe']} in round 1 "
+        f"(of {result['worlds']['tried']} tried by the s{seeds[0]} dr agent)",
+        "dirs": [str(here / "agents" / f"influenced-s{seed}") for seed in seeds],
+        "wall_seconds": round(sum(train), 1),
+        "search_wall_seconds": round(sum(search), 1),
+        "search_episodes_per_round": (counts["candidates"] + counts["search_budget"]) * counts["repeats"],
+        "training_episodes_before": "the selecting dr agent's training (the dr arm's first seed), and each earlier round's",
+        "rounds": rounds,
     }
 
 
@@ -158,6 +196,15 @@ def evaluate_agent(spec, agent_dir: str, generator_dir: Path, worlds, repeats: i
     with open(cache, "wb") as handle:
         np.savez(handle, **metrics, **{SECONDS_KEY: np.float64(seconds)})
     return metrics, seconds
+
+
+def atlas_worst(spec, agent_dir: str, generator, repeats: int, budget: int, store, name: str, progress: bool) -> float:
+    """The worst world (main metric, normalised where the env has bounds) a CMA-ME atlas of ``budget``
+    worlds finds on the agent; the campaign ``name`` in ``store`` resumes."""
+    setup = experiments.setup(spec.name, agent_dir, generator, repeats=repeats)
+    found = experiments.atlas(store, setup, spec.metrics.main, budget=budget, seed=0, name=name, progress=progress)
+    worst = min(e.score for e in found["evaluations"])
+    return float(spec.metrics.normalise(np.float64(worst), setup.params)) if spec.metrics.bounds is not None else float(worst)
 
 
 def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
@@ -204,9 +251,16 @@ def main(argv=None) -> dict:
     parser.add_argument("--episodes", type=int, default=None, help="training episodes per run (default: the paper preset's)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     parser.add_argument(
-        "--arms", nargs="+", default=["dr", "plr", "accel", "target"], help="curricula, and 'offline' (the paper's influence; needs dr)"
+        "--arms", nargs="+", default=["dr", "plr", "accel", "target"], help="curricula, and 'offline' / 'rounds' (the paper's influence; need dr)"
     )
-    parser.add_argument("--offline-search", type=int, nargs=2, default=(1000, 525), metavar=("CANDIDATES", "SEARCH"), help="the offline arm's worlds")
+    parser.add_argument(
+        "--offline-search", type=int, nargs=2, default=(1000, 525), metavar=("CANDIDATES", "SEARCH"), help="worlds each influence round plays"
+    )
+    parser.add_argument("--rounds", type=int, default=3, help="the rounds arm's rounds (influence --rounds)")
+    parser.add_argument(
+        "--influence-eval-worlds", type=int, default=100, help="the influence experiment's own evaluation (this one's is --eval-worlds)"
+    )
+    parser.add_argument("--atlas-budget", type=int, default=420, help="worlds of each agent's failure atlas (0: none)")
     parser.add_argument("--target", default=None, help="the target arm's target (default: the env's failure event)")
     parser.add_argument("--maximize", dest="maximize", action="store_true", default=None)
     parser.add_argument("--minimize", dest="maximize", action="store_false")
@@ -235,15 +289,18 @@ def main(argv=None) -> dict:
     settings = parse_curriculum_settings(args.curriculum_set)
 
     arms, per_seed = {}, {}
-    if "offline" in args.arms and ("dr" not in args.arms or args.arms.index("offline") < args.arms.index("dr")):
-        raise SystemExit("--arms: the offline arm selects its worlds with dr's first agent; list dr before offline.")
+    for arm in set(args.arms) & set(INFLUENCE_ARMS):
+        if "dr" not in args.arms or args.arms.index(arm) < args.arms.index("dr"):
+            raise SystemExit(f"--arms: the {arm} arm selects its worlds with dr's first agent; list dr before {arm}.")
     suffix = "" if episodes == defaults["episodes"] else f"-{episodes}"
     out = RESULTS / f"curriculum-{spec.name}{suffix}.json"
     for done, arm in enumerate(args.arms, start=1):
-        if arm == "offline":
-            counts = {"candidates": args.offline_search[0], "search_budget": args.offline_search[1], "repeats": args.repeats, "seed": 0}
-            arms[arm] = offline_arm(
-                spec, algo, config, options, generator, generator_dir, arms["dr"]["dirs"][0], args.seeds, work / arm, counts, not args.quiet
+        if arm in INFLUENCE_ARMS:
+            counts = {"candidates": args.offline_search[0], "search_budget": args.offline_search[1], "repeats": args.repeats}
+            counts["eval_worlds"] = args.influence_eval_worlds
+            rounds = 1 if arm == "offline" else args.rounds
+            arms[arm] = influence_arm(
+                spec, algo, config, generator, arms["dr"]["dirs"], args.seeds, work / "influence", counts, rounds, not args.quiet
             )
         else:
             target = target_score(spec, target_text, args.maximize) if arm == "target" else None
@@ -256,6 +313,11 @@ def main(argv=None) -> dict:
                 cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
                 metrics, took = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, cache)
                 per_seed[arm][seed] = agent_statistics(spec, metrics, params)
+                if args.atlas_budget:
+                    with RunStore(work / "atlas") as store:
+                        per_seed[arm][seed]["atlas_worst"] = atlas_worst(
+                            spec, agent_dir, generator, args.repeats, args.atlas_budget, store, f"atlas-{arm}-s{seed}", not args.quiet
+                        )
                 seconds.append(took)
                 print(arm, seed, {k: round(v, 4) if isinstance(v, float) else v for k, v in per_seed[arm][seed].items()}, flush=True)
             arms[arm]["evaluation_wall_seconds"] = None if None in seconds else round(sum(seconds), 1)  # None: cached before kept
@@ -268,13 +330,14 @@ def main(argv=None) -> dict:
             "seeds": args.seeds,
             "generator": str(generator_dir),
             "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
+            "atlas": {"budget": args.atlas_budget, "method": "CMA-ME over the env's default descriptors", "seed": 0},
+            "influence": {"selection": spec.selection, "worlds_per_round": args.offline_search, "rounds": args.rounds},
             "target": {"text": target_text, "maximize": args.maximize},
             "curriculum_settings": settings,
             "arms": arms,
             "arms_pending": args.arms[done:],  # written after every arm: a partial file says what is still to come
             "per_seed": per_seed,
             "summary": compare(per_seed),
-            "not_run": NOT_RUN,
             "notes": args.note,
             "machine": describe_machine(),
             "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),

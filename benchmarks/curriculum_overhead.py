@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -84,6 +85,7 @@ def main(argv=None) -> dict:
         "ratio_to_dr_fastest_chunk": {arm: min(seconds[arm]) / min(seconds["dr"]) for arm in args.arms} if "dr" in seconds else {},
         "all_seconds_per_update": seconds,
         "machine": describe_machine(),
+        "load_average_after": [round(x, 2) for x in os.getloadavg()],  # (1, 5, 15 min): ~1 on quiet 2 cores
         "command": "python benchmarks/curriculum_overhead.py " + " ".join(sys.argv[1:] if argv is None else argv),
     }
     out = RESULTS / f"curriculum-overhead-{spec.name}.json"

@@ -49,7 +49,7 @@ def register(app: typer.Typer) -> None:
     @app.command()
     @friendly_errors
     def reproduce(
-        preset: str = typer.Option("quick", "--preset", help="quick (about 15 min on 2 CPU cores), paper (the paper's budgets; a GPU) or tiny (CI)."),
+        preset: str = typer.Option("quick", "--preset", help="quick (under 10 min on 2 CPU cores), paper (the paper's budgets; a GPU) or tiny (CI)."),
         env: str = typer.Option("all", "--env", help=f"all, or one of: {', '.join(registry.names())}."),
         out: Path = typer.Option(None, "--out", help="Run directory (default runs/PRESET); a rerun skips finished phases, a killed run resumes."),
         algo: str = typer.Option(

@@ -8,8 +8,8 @@ no edit here:
 - ``paper``: the paper's budgets (§5.2–§6: 10,000 worlds, 10,000 racing / 5,000 harvest
   training episodes, CMA-ES population 21, 8 episodes per world, 1,000 random worlds). Search
   and influence budgets the paper does not state are ours (marked in the field docs). For a GPU.
-- ``quick``: the README's main job. Small budgets that finish both environments in about
-  15 minutes on 2 CPU cores and still show every phenomenon: a high random mean beside a
+- ``quick``: the README's main job. Small budgets that finish both environments in under
+  10 minutes on 2 CPU cores and still show every phenomenon: a high random mean beside a
   much lower minimum and a higher maximum, ES against BO against random search, and the
   influenced agents' metrics beside the default ones.
 - ``tiny``: the whole pipeline in about a minute per environment (CI and tests); its numbers
@@ -332,7 +332,7 @@ def make_curriculum_of(env: str, request: dict, worlds: Any) -> Any:
 # name -> (description, settings other than budgets); budgets come from each EnvSpec.presets[name]
 SETTINGS = {
     "tiny": ("Every phase at a toy budget (CI and tests); the numbers mean nothing.", {"repeats": 2, "vae_hidden": (64, 32), "vae_batch_size": 32}),
-    "quick": ("Small budgets that finish both environments in about 15 minutes on 2 CPU cores and still show every phenomenon.", {}),
+    "quick": ("Small budgets that finish both environments in under 10 minutes on 2 CPU cores and still show every phenomenon.", {}),
     "paper": (
         "The paper's budgets (10,000 worlds, 10,000 / 5,000 training episodes, population 21, 8 repeats, 1,000 random worlds); for a GPU.",
         {},

@@ -320,8 +320,9 @@ def replay(args) -> None:
     }
     path = RESULTS / "failure-rate-coverage.json"
     kept = json.loads(path.read_text()) if path.exists() else {}
-    kept = {key: value for key, value in kept.items() if key not in (f"{args.env}-{args.name}", "not_run")}
-    kept |= {f"{args.env}-{args.name}": payload, "not_run": NOT_RUN}
+    key = "-".join([args.env, args.name, *([args.label] if args.label else [])])
+    kept = {k: value for k, value in kept.items() if k not in (key, "not_run")}
+    kept |= {key: payload, "not_run": NOT_RUN}
     path.write_text(json.dumps(kept, indent=1) + "\n")
     print("->", path, flush=True)
 
@@ -422,6 +423,11 @@ def main() -> None:
     study.add_argument("--seeds", type=int, default=20)
     study.add_argument("--fresh", choices=("auto", "cell", "bootstrap", "none"), default="auto", help="how a world is played again (Population)")
     study.add_argument("--proposals", nargs="+", default=["mc", "stratified", "stratified, forced", "mixture (before)", "learned", "learned, forced"])
+    study.add_argument(
+        "--label",
+        default="",
+        help="a suffix of the result's key, so that a second study of one agent (e.g. more seeds of one proposal) keeps the first",
+    )
     sub.add_parser("table", help="print the results file as a markdown table")
     args = parser.parse_args()
     {"record": record, "study": replay, "table": table}[args.command](args)

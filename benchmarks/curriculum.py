@@ -22,6 +22,8 @@ seed) ``--repeats`` times, and we report per agent:
 - ``worst``: the worst world's main metric among them (a random search of ``--eval-worlds``);
 - ``atlas_worst``: the worst world a fixed-budget failure atlas (CMA-ME, ``--atlas-budget``
   worlds, the same seed for every agent) finds on the agent;
+- ``training_<metric>``: the env's main and highlighted metrics over the last 20% of the agent's
+  training updates (its learning curve): how often it still met failures on its arm's worlds;
 - the training wall time of each arm (its seeds together, from the runs' curves: resumes add up).
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
@@ -140,6 +142,14 @@ def round_seconds(work: Path, r: int, seeds) -> tuple[float, float]:
     return kept[str(r)], max(curve_seconds(here / "agents" / f"influenced-s{seed}") for seed in seeds)
 
 
+def late_training(run_dir: Path, names, share: float = 0.2) -> dict[str, float]:
+    """{training_<name>: mean of the curve's per-update values over its last ``share`` of updates} for the ``names`` it has."""
+    with open(run_dir / "curve.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    late = rows[int(len(rows) * (1 - share)) :]
+    return {f"training_{name}": float(np.nanmean([float(row[name]) for row in late])) for name in names if name in rows[0]}
+
+
 def curve_seconds(run_dir: Path) -> float:
     """The wall clock of a run's learning curve at its last update (resumes add up)."""
     with open(run_dir / "curve.csv", newline="") as handle:
@@ -233,7 +243,7 @@ def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
     """{stat: {arm: mean_and_ci over seeds, + overlaps_dr}}."""
     out: dict = {}
     first = next(iter(next(iter(per_seed.values())).values()))
-    for stat in (*STATS, *(name for name in first if name.startswith("mean_"))):
+    for stat in (*STATS, *(name for name in first if name.startswith(("mean_", "training_")))):
         out[stat] = {arm: mean_and_ci([values[stat] for values in seeds.values()]) for arm, seeds in per_seed.items()}
         base = out[stat].get("dr")
         for arm, summary in out[stat].items():
@@ -313,6 +323,7 @@ def main(argv=None) -> dict:
                 cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
                 metrics, took = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, cache)
                 per_seed[arm][seed] = agent_statistics(spec, metrics, params)
+                per_seed[arm][seed] |= late_training(Path(agent_dir), (spec.metrics.main, *spec.metrics.highlighted))
                 if args.atlas_budget:
                     with RunStore(work / "atlas") as store:
                         per_seed[arm][seed]["atlas_worst"] = atlas_worst(

@@ -80,6 +80,12 @@ def paper_defaults(spec) -> dict:
     }
 
 
+def curve_rows(run_dir: Path) -> list[dict[str, str]]:
+    """A training run's learning curve (``curve.csv``), a row per update."""
+    with open(run_dir / "curve.csv", newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
 def trained_before(out_dir: Path, config, described: str) -> dict | None:
     """{episodes, wall_seconds} of a run this benchmark trained to its budget before, read from its
     run.json, saved agent and curve, not its checkpoint (which a later change to the env's state
@@ -90,8 +96,7 @@ def trained_before(out_dir: Path, config, described: str) -> dict | None:
     record = json.loads(files["run.json"].read_text())
     if record.get("config") != json.loads(json.dumps(config.to_dict())) or record.get("distribution") != described:
         return None
-    with open(files["curve.csv"], newline="") as handle:
-        last = list(csv.DictReader(handle))[-1]
+    last = curve_rows(out_dir)[-1]
     episodes = int(float(last["episodes"]))
     return {"episodes": episodes, "wall_seconds": float(last["wall_seconds"])} if episodes >= config.episodes else None
 
@@ -121,8 +126,7 @@ def link_default_agents(run_dir: Path, dr_dirs: list[str], seeds) -> None:
             link.parent.mkdir(parents=True, exist_ok=True)
             link.symlink_to(Path(trained).resolve(), target_is_directory=True)
         if not (link / TRAINED_FILE).is_file():
-            with open(link / "curve.csv", newline="") as handle:
-                last = list(csv.DictReader(handle))[-1]
+            last = curve_rows(link)[-1]
             record = {"policy": "policy", "episodes": int(float(last["episodes"])), "env_steps": int(float(last["env_steps"]))}
             record |= {"wall_seconds": float(last["wall_seconds"]), "seed": int(seed), "distribution": "G(z), z ~ N(0, I) (the dr arm's agent)"}
             write_text(link / TRAINED_FILE, json.dumps(record, indent=1))
@@ -144,16 +148,14 @@ def round_seconds(work: Path, r: int, seeds) -> tuple[float, float]:
 
 def late_training(run_dir: Path, names, share: float = 0.2) -> dict[str, float]:
     """{training_<name>: mean of the curve's per-update values over its last ``share`` of updates} for the ``names`` it has."""
-    with open(run_dir / "curve.csv", newline="") as handle:
-        rows = list(csv.DictReader(handle))
+    rows = curve_rows(run_dir)
     late = rows[int(len(rows) * (1 - share)) :]
     return {f"training_{name}": float(np.nanmean([float(row[name]) for row in late])) for name in names if name in rows[0]}
 
 
 def curve_seconds(run_dir: Path) -> float:
     """The wall clock of a run's learning curve at its last update (resumes add up)."""
-    with open(run_dir / "curve.csv", newline="") as handle:
-        return float(list(csv.DictReader(handle))[-1]["wall_seconds"])
+    return float(curve_rows(run_dir)[-1]["wall_seconds"])
 
 
 def influence_arm(spec, algo, config, generator, dr_dirs: list[str], seeds, work: Path, counts: dict, rounds: int, progress: bool) -> dict:

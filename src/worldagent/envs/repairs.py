@@ -56,7 +56,7 @@ class NearestWorld:
         ``[h, 1]`` f32[B, H + 1] and picks the same worlds, as ``logits · c = [h, 1] · [kernel c; bias · c]``.
 
         Racing decodes 4,096 cells from a 1,024-wide layer: a quarter of the products per world,
-        and no f32[B, 4096] logits (decoding for training and search was ~8x faster).
+        and no f32[B, 4096] logits: 6.5-8x faster decoding at 16-32 latents a call on 2 CPU cores.
         """
         return NearestWorld(jnp.concatenate([self.cells @ kernel.T, (self.cells @ bias)[:, None]], axis=1), self.worlds)
 

@@ -56,7 +56,8 @@ class NearestWorld:
         ``[h, 1]`` f32[B, H + 1] and picks the same worlds, as ``logits · c = [h, 1] · [kernel c; bias · c]``.
 
         Racing decodes 4,096 cells from a 1,024-wide layer: a quarter of the products per world,
-        and no f32[B, 4096] logits: 6.5-8x faster decoding at 16-32 latents a call on 2 CPU cores.
+        and no f32[B, 4096] logits (benchmarks/decode.py: 3.7-4.6x faster at 16-256 latents a call). Float
+        rounding can tip a near-tie to the other track (1 latent of 20,000 there).
         """
         return NearestWorld(jnp.concatenate([self.cells @ kernel.T, (self.cells @ bias)[:, None]], axis=1), self.worlds)
 

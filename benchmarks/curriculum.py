@@ -192,7 +192,7 @@ def evaluation_worlds(generator, count: int):
     return np.asarray(z), generate(generator, z)
 
 
-def evaluate_agent(spec, agent_dir: str, generator_dir: Path, worlds, repeats: int, cache: Path) -> tuple[dict[str, np.ndarray], float | None]:
+def evaluate_agent(spec, agent_dir: str, generator, worlds, repeats: int, cache: Path) -> tuple[dict[str, np.ndarray], float | None]:
     """({metric: f64[B, R]} of the agent on the evaluation worlds, the seconds that took), cached
     (seconds None for a cache written before they were kept)."""
     if cache.is_file():
@@ -200,7 +200,7 @@ def evaluate_agent(spec, agent_dir: str, generator_dir: Path, worlds, repeats: i
         seconds = stored.pop(SECONDS_KEY, None)
         return stored, None if seconds is None else float(seconds)
     clock = time.perf_counter()
-    setup = experiments.setup(spec.name, agent_dir, str(generator_dir), repeats=repeats)
+    setup = experiments.setup(spec.name, agent_dir, generator, repeats=repeats)
     metrics = evaluate(setup.env, setup.policy, worlds, repeats, jax.random.key(EVAL_SEED + 1), setup.params)
     metrics = {name: np.asarray(value, np.float64) for name, value in spec.metrics.with_derived(metrics, setup.params).items()}
     seconds = time.perf_counter() - clock
@@ -323,7 +323,7 @@ def main(argv=None) -> dict:
             per_seed[arm], seconds = {}, []
             for seed, agent_dir in zip(args.seeds, arms[arm]["dirs"]):
                 cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
-                metrics, took = evaluate_agent(spec, agent_dir, generator_dir, worlds, args.repeats, cache)
+                metrics, took = evaluate_agent(spec, agent_dir, generator, worlds, args.repeats, cache)
                 per_seed[arm][seed] = agent_statistics(spec, metrics, params)
                 per_seed[arm][seed] |= late_training(Path(agent_dir), (spec.metrics.main, *spec.metrics.highlighted))
                 if args.atlas_budget:

@@ -71,10 +71,14 @@ class Generator:
         if not isinstance(z, jax.core.Tracer):
             check_finite("latents", z)
 
+    def _decoder(self, z: jax.Array, method=VAE.decode) -> jax.Array:
+        """``method`` of the decoder (default ``VAE.decode``) on latents z f[B, latent_dim], checked."""
+        self.check_latents(z)
+        return self.model.apply({"params": self.params}, jnp.asarray(z, jnp.float32), method=method)
+
     def logits(self, z: jax.Array) -> jax.Array:
         """f32[B, D] decoded Bernoulli logits of the cells for latents z f[B, latent_dim]."""
-        self.check_latents(z)
-        return self.model.apply({"params": self.params}, jnp.asarray(z, jnp.float32), method=VAE.decode)
+        return self._decoder(z)
 
     def encode(self, cells) -> jax.Array:
         """f32[B, latent_dim]: the encoder's mean latent of each world's cells f[B, D]."""
@@ -84,8 +88,7 @@ class Generator:
         """A batch of B valid worlds for latents z f[B, latent_dim] (paper Equation 3)."""
         if self.folded is None:
             return self.repair(self.logits(z))
-        self.check_latents(z)
-        hidden = self.model.apply({"params": self.params}, jnp.asarray(z, jnp.float32), method=VAE.hidden)
+        hidden = self._decoder(z, VAE.hidden)
         return self.folded(jnp.concatenate([hidden, jnp.ones((len(hidden), 1), hidden.dtype)], axis=1))
 
 

@@ -24,6 +24,8 @@ seed) ``--repeats`` times, and we report per agent:
   worlds, the same seed for every agent) finds on the agent;
 - ``training_<metric>``: the env's main and highlighted metrics over the last 20% of the agent's
   training updates (its learning curve): how often it still met failures on its arm's worlds;
+- ``buffer_on_target`` (the ``target`` arm, toward an event): the share of its last buffer's worlds
+  whose recent episodes meet the event, what training was replaying at the end;
 - the training wall time of each arm (its seeds together, from the runs' curves: resumes add up).
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
@@ -50,7 +52,7 @@ from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.many import ManyRun, train_many  # noqa: E402
 from worldagent.analysis.intervals import clopper_pearson  # noqa: E402
-from worldagent.curricula import label, make_curriculum, parse_curriculum_settings  # noqa: E402
+from worldagent.curricula import label, make_curriculum, parse_curriculum_settings, snapshots  # noqa: E402
 from worldagent.curricula.scores import target_score  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.errors import WorldagentError  # noqa: E402
@@ -153,6 +155,13 @@ def late_training(run_dir: Path, names, share: float = 0.2) -> dict[str, float]:
     return {f"training_{name}": float(np.nanmean([float(row[name]) for row in late])) for name in names if name in rows[0]}
 
 
+def buffer_on_target(run_dir: Path) -> dict[str, float]:
+    """{buffer_on_target: the share of the run's last buffer snapshot whose scores are > 0}: a
+    ``target`` buffer scores a world by its episodes' margin to the event, > 0 where it holds."""
+    last = sorted((run_dir / snapshots.FOLDER).glob("buffer-*.npz"))[-1:]
+    return {"buffer_on_target": float((np.load(last[0])["score"] > 0).mean())} if last else {}
+
+
 def curve_seconds(run_dir: Path) -> float:
     """The wall clock of a run's learning curve at its last update (resumes add up)."""
     return float(curve_rows(run_dir)[-1]["wall_seconds"])
@@ -244,9 +253,13 @@ def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
 def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
     """{stat: {arm: mean_and_ci over seeds, + overlaps_dr}}."""
     out: dict = {}
-    first = next(iter(next(iter(per_seed.values())).values()))
-    for stat in (*STATS, *(name for name in first if name.startswith(("mean_", "training_")))):
-        out[stat] = {arm: mean_and_ci([values[stat] for values in seeds.values()]) for arm, seeds in per_seed.items()}
+    kept = dict.fromkeys(name for seeds in per_seed.values() for values in seeds.values() for name in values)
+    for stat in (*STATS, *(name for name in kept if name.startswith(("mean_", "training_", "buffer_")))):
+        out[stat] = {
+            arm: mean_and_ci([values[stat] for values in seeds.values()])
+            for arm, seeds in per_seed.items()
+            if all(stat in values for values in seeds.values())
+        }
         base = out[stat].get("dr")
         for arm, summary in out[stat].items():
             if base is not None and arm != "dr" and np.isfinite(summary["ci95"]) and np.isfinite(base["ci95"]):
@@ -326,6 +339,8 @@ def main(argv=None) -> dict:
                 metrics, took = evaluate_agent(spec, agent_dir, generator, worlds, args.repeats, cache)
                 per_seed[arm][seed] = agent_statistics(spec, metrics, params)
                 per_seed[arm][seed] |= late_training(Path(agent_dir), (spec.metrics.main, *spec.metrics.highlighted))
+                if arm == "target" and args.maximize is None:
+                    per_seed[arm][seed] |= buffer_on_target(Path(agent_dir))
                 if args.atlas_budget:
                     with RunStore(work / "atlas") as store:
                         per_seed[arm][seed]["atlas_worst"] = atlas_worst(

@@ -119,9 +119,9 @@ def train_arm(spec, algo, config, options, curriculum, seeds, work: Path, progre
     return {"dirs": [str(r.out_dir) for r in results], "wall_seconds": round(wall, 1), "episodes": [r.episodes for r in results]}
 
 
-def link_default_agents(run_dir: Path, dr_dirs: list[str], seeds) -> None:
+def link_default_agents(run_dir: Path, dr_dirs: list[str], seeds, source: str = "the dr arm's agent") -> None:
     """Make the ``dr`` arm's agents the influence experiment's default agents: the same algorithm,
-    config, G(z) and seeds, so training them again would only repeat them."""
+    config, G(z) and seeds, so training them again would only repeat them (``source`` says whose)."""
     for seed, trained in zip(seeds, dr_dirs):
         link = run_dir / "agents" / f"default-s{seed}"
         if not link.exists():
@@ -130,7 +130,7 @@ def link_default_agents(run_dir: Path, dr_dirs: list[str], seeds) -> None:
         if not (link / TRAINED_FILE).is_file():
             last = curve_rows(link)[-1]
             record = {"policy": "policy", "episodes": int(float(last["episodes"])), "env_steps": int(float(last["env_steps"]))}
-            record |= {"wall_seconds": float(last["wall_seconds"]), "seed": int(seed), "distribution": "G(z), z ~ N(0, I) (the dr arm's agent)"}
+            record |= {"wall_seconds": float(last["wall_seconds"]), "seed": int(seed), "distribution": f"G(z), z ~ N(0, I) ({source})"}
             write_text(link / TRAINED_FILE, json.dumps(record, indent=1))
 
 

@@ -6,6 +6,9 @@
     python benchmarks/influence_racing.py --regime NAME --selection paper
     # issue 26, item 2: our fully trained agent, its own failure, plus held-out failing worlds
     python benchmarks/influence_racing.py --regime ours --selection ours
+    # the same, its default arm the curriculum benchmark's dr agents (that regime, G(z) and seeds 0-4)
+    python benchmarks/influence_racing.py --regime ours --selection ours --generator runs/quick/racing/generator \\
+        --default-agents runs/curriculum-racing/dr/s{0,1,2,3,4} --work runs/influence-racing-ours
     # smoke (tiny budgets; not a measurement, write it elsewhere):
     python benchmarks/influence_racing.py --regime ours --selection ours --episodes 32 --eval-worlds 16 --seeds 0 1 \\
         --candidates 16 --atlas-budget 105 --search-budget 105 --heldout-search-budget 105 \\
@@ -62,6 +65,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from curriculum import link_default_agents  # noqa: E402
 from influence_harvest import comparison  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
 from racing_regime import OPTIONS, REPEATS, episode_summary, in_window, regimes  # noqa: E402
@@ -300,6 +304,14 @@ def main(argv=None) -> dict:
     parser.add_argument(
         "--results", type=Path, default=None, help="the result file (default under benchmarks/results/, named by regime and selection)"
     )
+    parser.add_argument(
+        "--default-agents",
+        nargs="+",
+        default=None,
+        metavar="DIR",
+        help="agents already trained in this regime on --generator's G(z), one per --seeds in order (e.g. the curriculum "
+        "benchmark's dr arm): the default arm links them instead of training them again",
+    )
     parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
@@ -309,6 +321,8 @@ def main(argv=None) -> dict:
         parser.error(f"--regime {regime.name} sets ACKTR settings; use --algo acktr or --regime ours")
     if args.episodes is not None and args.episodes < 1:
         parser.error("--episodes must be at least 1")
+    if args.default_agents and len(args.default_agents) != len(args.seeds):
+        parser.error(f"--default-agents: give one agent per seed ({len(args.seeds)}), in --seeds' order")
     episodes = regime.budget(args.episodes)
     config = regime.config(args.episodes, args.algo)
     default_run = regime.name == "ours" and args.episodes is None
@@ -326,6 +340,8 @@ def main(argv=None) -> dict:
         selection = SELECTIONS.get(args.selection, args.selection)
     tag = "" if args.selection == "auto" else "-" + (args.selection if args.selection in SELECTIONS else slug(selection))
     influence_dir = base / f"influence-{args.algo}{tag}"
+    if args.default_agents:
+        link_default_agents(influence_dir, args.default_agents, args.seeds, source=f"linked from {args.default_agents[0]} and on")
     result = experiments.influence(
         influence_dir,
         setup,
@@ -396,6 +412,7 @@ def main(argv=None) -> dict:
             "random": {"mean_normalised": 0.87, "min": 0.13, "max": 0.99},
         },
         "generator": str(gen_dir),
+        "default_agents": args.default_agents or "trained here",
         "wall_seconds": round(time.perf_counter() - started, 1),
         "influence_wall_seconds": result["wall_seconds"],
         "work": str(base),

@@ -319,6 +319,7 @@ def replay(args) -> None:
             "min_gain": pooled.MIN_GAIN,
         },
         "events": events,
+        "notes": args.note,
     }
     path = RESULTS / "failure-rate-coverage.json"
     kept = json.loads(path.read_text()) if path.exists() else {}
@@ -430,6 +431,7 @@ def main() -> None:
         default="",
         help="a suffix of the result's key, so that a second study of one agent (e.g. more seeds of one proposal) keeps the first",
     )
+    study.add_argument("--note", action="append", default=[], help="a sentence the result keeps (e.g. how the record was made)")
     sub.add_parser("table", help="print the results file as a markdown table")
     args = parser.parse_args()
     {"record": record, "study": replay, "table": table}[args.command](args)

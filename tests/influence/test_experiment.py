@@ -14,6 +14,7 @@ from PIL import Image
 from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.policy import Policy
 from worldagent.agents.ppo import PPOConfig
+from worldagent.agents.training import CURVE_FILE, read_curve
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.experiments import example_worlds, influence, setup
@@ -127,7 +128,10 @@ def test_an_unfinished_agent_is_resumed_from_its_checkpoint(racing_run, racing_g
     (run_dir / "agents" / "influenced-s1" / "trained.json").unlink()  # as if killed after its last checkpoint
     untouched = file_times(run_dir / "agents" / "default-s0")
     again = run_racing(run_dir, racing_generator)
-    assert (run_dir / "agents" / "influenced-s1" / "trained.json").is_file()
+    resumed = run_dir / "agents" / "influenced-s1"
+    assert (resumed / "trained.json").is_file()
+    # its recorded training time is the whole training's (the curve's clock), not the resume's
+    assert json.loads((resumed / "trained.json").read_text())["wall_seconds"] == read_curve(resumed / CURVE_FILE)[-1]["wall_seconds"]
     assert file_times(run_dir / "agents" / "default-s0") == untouched
     assert again["per_seed"] == first["per_seed"]
 

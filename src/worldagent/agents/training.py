@@ -65,7 +65,8 @@ class TrainResult:
     resumed_from_update: int | None
 
 
-def _read_curve(path: Path) -> list[dict]:
+def read_curve(path: Path) -> list[dict]:
+    """A learning curve's rows (``curve.csv``: its clock adds up across resumes); [] when there is none."""
     if not path.is_file():
         return []
     with open(path, newline="") as handle:
@@ -252,7 +253,7 @@ def open_run(
     if resuming:
         state = _restore(state, checkpoint)
         resumed_from = int(state.update)
-        rows = [r for r in _read_curve(out_dir / CURVE_FILE) if r["update"] <= resumed_from]
+        rows = [r for r in read_curve(out_dir / CURVE_FILE) if r["update"] <= resumed_from]
     out_dir.mkdir(parents=True, exist_ok=True)
     write_bytes(out_dir / RUN_FILE, json.dumps(record, indent=1).encode())
     offset = rows[-1]["wall_seconds"] if rows else 0.0

@@ -14,6 +14,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from worldagent.agents.training import CURVE_FILE, read_curve
 from worldagent.errors import WorldagentError
 from worldagent.events import Selection
 from worldagent.files import write_text
@@ -29,8 +30,11 @@ def trained_record(out: Path) -> dict | None:
 
 
 def mark_trained(out: Path, result: Any, seed: int, described: str) -> dict:
-    """Write ``out/trained.json`` after its trainer returned (a rerun then neither compiles nor rewrites the agent)."""
-    record = {"policy": "policy", "episodes": result.episodes, "env_steps": result.env_steps, "wall_seconds": round(result.wall_seconds, 3)}
+    """Write ``out/trained.json`` after its trainer returned (a rerun then neither compiles nor rewrites the agent).
+    Its ``wall_seconds`` is the whole training's, resumes included: the learning curve's clock."""
+    rows = read_curve(out / CURVE_FILE)
+    seconds = rows[-1]["wall_seconds"] if rows else result.wall_seconds
+    record = {"policy": "policy", "episodes": result.episodes, "env_steps": result.env_steps, "wall_seconds": round(seconds, 3)}
     write_text(out / TRAINED_FILE, json.dumps({**record, "seed": int(seed), "distribution": described}, indent=1))
     return trained_record(out)
 

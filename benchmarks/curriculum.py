@@ -36,7 +36,6 @@ Across seeds: means with 95% Student-t intervals, and whether each arm's interva
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 import time
@@ -51,6 +50,7 @@ from worldagent import experiments  # noqa: E402
 from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.many import ManyRun, train_many  # noqa: E402
+from worldagent.agents.training import CURVE_FILE, read_curve  # noqa: E402
 from worldagent.analysis.intervals import clopper_pearson  # noqa: E402
 from worldagent.curricula import label, make_curriculum, parse_curriculum_settings, snapshots  # noqa: E402
 from worldagent.curricula.scores import target_score  # noqa: E402
@@ -82,10 +82,9 @@ def paper_defaults(spec) -> dict:
     }
 
 
-def curve_rows(run_dir: Path) -> list[dict[str, str]]:
+def curve_rows(run_dir: Path) -> list[dict[str, float]]:
     """A training run's learning curve (``curve.csv``), a row per update."""
-    with open(run_dir / "curve.csv", newline="") as handle:
-        return list(csv.DictReader(handle))
+    return read_curve(run_dir / CURVE_FILE)
 
 
 def trained_before(out_dir: Path, config, described: str) -> dict | None:

@@ -10,13 +10,14 @@ from worldagent.agents.acktr import ACKTRConfig
 from worldagent.agents.algorithms import ALGORITHMS, get_algorithm, training_config
 from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.ppo import PPOConfig
-from worldagent.agents.training import plotted_metrics, train
+from worldagent.agents import training
+from worldagent.agents.training import CHECKPOINT_FILE, plotted_metrics, train
 from worldagent.envs import registry
 from worldagent.envs.racing.metrics import normalised_return, racing_return_bounds
 from worldagent.errors import WorldagentError
 
 
-def test_train_writes_run_and_resumes_identically(tmp_path, racing_spec, racing_pool, tiny_ppo):
+def test_train_writes_run_and_resumes_identically(tmp_path, monkeypatch, racing_spec, racing_pool, tiny_ppo):
     run = lambda out, **kw: train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / out, seed=3, progress=False, chunk_updates=2, **kw)  # noqa: E731
     whole = run("whole")
     assert whole.episodes >= tiny_ppo.total_episodes and whole.resumed_from_update is None
@@ -35,6 +36,29 @@ def test_train_writes_run_and_resumes_identically(tmp_path, racing_spec, racing_
     for a, b in zip(jax.tree_util.tree_leaves(whole.agent.params), jax.tree_util.tree_leaves(resumed.agent.params)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(whole.curve["episodes"], resumed.curve["episodes"])
+
+    # Checkpoints are timed, not per chunk; one is written when an exception (Ctrl-C) stops the loop.
+    monkeypatch.setattr(training, "CHECKPOINT_SECONDS", float("inf"))
+    written, chunks = [], []
+    write_bytes = training.write_bytes
+    monkeypatch.setattr(training, "write_bytes", lambda path, blob: (written.append(path.name), write_bytes(path, blob))[1])
+
+    def interrupt_after_two_chunks(run):
+        chunks.append(run)
+        if len(chunks) == 2:
+            raise KeyboardInterrupt
+        return {}
+
+    monkeypatch.setattr(training, "status", interrupt_after_two_chunks)
+    one_update = lambda: train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / "interrupted", seed=3, progress=False, chunk_updates=1)  # noqa: E731
+    with pytest.raises(KeyboardInterrupt):
+        one_update()
+    assert written.count(CHECKPOINT_FILE) == 1
+    monkeypatch.undo()
+    resumed = one_update()
+    assert resumed.resumed_from_update == 2
+    for a, b in zip(jax.tree_util.tree_leaves(whole.agent.params), jax.tree_util.tree_leaves(resumed.agent.params)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
     with pytest.raises(WorldagentError, match="another seed"):
         train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / "killed", seed=4, progress=False)

@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from worldagent.agents.distributions import WorldPool
-from worldagent.agents.training import OpenRun, TrainResult, finish_run, open_run, record_chunk, status
+from worldagent.agents.training import OpenRun, TrainResult, checkpoint, finish_run, open_run, record_chunk, status
 from worldagent.errors import WorldagentError
 from worldagent.progress import progress_bar
 
@@ -156,18 +156,22 @@ def _train_group(group: list[OpenRun], args: list[tuple], stop_after_chunks: int
     budgets = [int(run.config.episodes) for run in group]
     done = lambda run: bool(run.trainer.done(run.state))  # noqa: E731
     start, chunks, states = time.perf_counter(), 0, _stack([run.state for run in group])
-    while not all(map(done, group)) and (stop_after_chunks is None or chunks < stop_after_chunks):
-        chunks += 1
-        before = [min(int(run.state.episodes), b) for run, b in zip(group, budgets)]
-        states, curves = chunk(states, own, common)
-        host_states, host_curves = jax.device_get((states, curves))
-        elapsed = time.perf_counter() - start
-        for i, run in enumerate(group):
-            curve = {name: column[i] for name, column in host_curves.items()}
-            if np.any(curve["active"] > 0):  # a finished run's chunk only skips: nothing to record
-                record_chunk(run, jax.tree_util.tree_map(lambda x, i=i: x[i], host_states), curve, elapsed)
-        runs_status = status(group[0])
-        advance(sum(min(int(run.state.episodes), b) for run, b in zip(group, budgets)) - sum(before), **runs_status)
+    try:
+        while not all(map(done, group)) and (stop_after_chunks is None or chunks < stop_after_chunks):
+            chunks += 1
+            before = [min(int(run.state.episodes), b) for run, b in zip(group, budgets)]
+            states, curves = chunk(states, own, common)
+            host_states, host_curves = jax.device_get((states, curves))
+            elapsed = time.perf_counter() - start
+            for i, run in enumerate(group):
+                curve = {name: column[i] for name, column in host_curves.items()}
+                if np.any(curve["active"] > 0):  # a finished run's chunk only skips: nothing to record
+                    record_chunk(run, jax.tree_util.tree_map(lambda x, i=i: x[i], host_states), curve, elapsed)
+            runs_status = status(group[0])
+            advance(sum(min(int(run.state.episodes), b) for run, b in zip(group, budgets)) - sum(before), **runs_status)
+    finally:
+        for run in group:
+            checkpoint(run)
     return time.perf_counter() - start
 
 
@@ -196,8 +200,8 @@ def train_many(
         progress: show one progress bar (episodes of all runs).
         resume: each run continues from its own checkpoint if it has one (see ``training.train``).
         stop_after_chunks: stop each group after this many chunks (a time-boxed run; resumable).
-        chunk_updates: updates per jitted chunk, a checkpoint of every run after each
-            (default: the config's).
+        chunk_updates: updates per jitted chunk (default: the config's); every run's checkpoint
+            is written as in ``training.train``.
         max_together: runs per program at most (memory); default ``default_max_together`` of a
             run's state size on the default device.
         backend: None or a local backend (train here), or a Ray backend

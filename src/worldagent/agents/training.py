@@ -4,9 +4,10 @@
 algorithm's trainer (``algorithms.ALGORITHMS``, ``trainer.Trainer``) and runs its jitted
 ``train_chunk`` a few updates at a time. Between chunks it advances the progress bar (episodes),
 appends the learning curve (``curve.csv``; ``curve.png`` at the end) and writes a checkpoint
-(``checkpoint.msgpack``, the whole training state with its key, atomically). A killed run
-started again on the same ``out_dir`` with ``resume=True`` continues from its last checkpoint
-and ends where the uninterrupted run would have. At the end the agent is saved to
+(``checkpoint.msgpack``, the whole training state with its key, atomically) every
+``CHECKPOINT_SECONDS`` and when the loop stops (done, ``stop_after_chunks``, an exception or
+Ctrl-C). A killed run started again on the same ``out_dir`` with ``resume=True`` continues
+from its last checkpoint and ends where the uninterrupted run would have. At the end the agent is saved to
 ``out_dir/policy`` (``saved.save_policy``).
 """
 
@@ -15,7 +16,7 @@ from __future__ import annotations
 import csv
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +39,9 @@ RUN_FILE = "run.json"
 CURVE_FILE = "curve.csv"
 PLOT_FILE = "curve.png"
 CURRICULUM_PLOT_FILE = "curriculum.png"
+# A DQN state holds its replay buffer (~94 MB for harvest): written after every chunk, it took
+# a third of the quick preset's harvest training. A kill loses at most this much training.
+CHECKPOINT_SECONDS = 30.0
 HOST_FIELDS = ("update", "wall_seconds")  # curve columns the driver adds to the trainer's
 
 
@@ -193,8 +197,10 @@ class OpenRun:
         rows: the learning curve so far (the checkpoint's rows when resumed).
         resumed_from: the checkpoint's update count when resumed, else None.
         wall_offset: seconds the curve had already counted before this call.
-        chunk_updates: updates per jitted chunk, a checkpoint after each.
+        chunk_updates: updates per jitted chunk.
         distribution: what the run draws its worlds from (a distribution or a curriculum).
+        checkpointed: the update count the checkpoint file holds (None: no checkpoint yet).
+        checkpoint_clock: ``time.perf_counter()`` when it was written (or the run opened).
     """
 
     spec: Any
@@ -210,6 +216,8 @@ class OpenRun:
     wall_offset: float
     chunk_updates: int
     distribution: Any = None
+    checkpointed: int | None = None
+    checkpoint_clock: float = field(default_factory=time.perf_counter)
 
 
 def _check_chunk_updates(config, chunk_updates: int | None) -> int:
@@ -257,16 +265,27 @@ def open_run(
     out_dir.mkdir(parents=True, exist_ok=True)
     write_bytes(out_dir / RUN_FILE, json.dumps(record, indent=1).encode())
     offset = rows[-1]["wall_seconds"] if rows else 0.0
-    return OpenRun(spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates, distribution)
+    return OpenRun(spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates, distribution, resumed_from)
 
 
 def record_chunk(run: OpenRun, state: Any, curve: dict, elapsed: float) -> None:
-    """After a chunk: the run's new state, its curve rows (``curve``: the chunk's, on the host) and checkpoint, written."""
+    """After a chunk: the run's new state, its curve rows (``curve``: the chunk's, on the host) written,
+    and its checkpoint when the last is ``CHECKPOINT_SECONDS`` old. A resume drops curve rows past
+    the checkpoint, so the curve may run ahead of it."""
     run.state = state
     run.rows += _new_rows(curve, int(state.update), run.wall_offset + elapsed)
-    write_bytes(run.out_dir / CHECKPOINT_FILE, flax.serialization.to_bytes(jax.device_get(state)))
     _write_curve(run.out_dir / CURVE_FILE, run.rows)
     save_snapshot(run.out_dir, state, int(state.update))
+    if time.perf_counter() - run.checkpoint_clock >= CHECKPOINT_SECONDS:
+        checkpoint(run)
+
+
+def checkpoint(run: OpenRun) -> None:
+    """Write the run's state as its checkpoint, unless the checkpoint already holds it."""
+    if run.checkpointed != int(run.state.update):
+        write_bytes(run.out_dir / CHECKPOINT_FILE, flax.serialization.to_bytes(jax.device_get(run.state)))
+        run.checkpointed = int(run.state.update)
+    run.checkpoint_clock = time.perf_counter()
 
 
 def status(run: OpenRun) -> dict:
@@ -339,8 +358,9 @@ def train(
         stop_after_chunks: stop after this many chunks even if the budget is not spent (a
             time-boxed run; the checkpoint lets a later call finish it). The agent saved is
             then the snapshot at the stop.
-        chunk_updates: updates per jitted chunk, a checkpoint after each (default: the
-            config's ``chunk_updates``; DQN: one episode of every env).
+        chunk_updates: updates per jitted chunk, the curve written after each (default: the
+            config's ``chunk_updates``; DQN: one episode of every env); the checkpoint every
+            ``CHECKPOINT_SECONDS`` and at the stop.
 
     Returns:
         ``TrainResult``.
@@ -354,12 +374,15 @@ def train(
     with progress_bar(f"training {algo} on {run.spec.name}", total=total, enabled=progress) as advance:
         advance(min(int(run.state.episodes), total))
         chunks = 0
-        while not bool(trainer.done(run.state)) and (stop_after_chunks is None or chunks < stop_after_chunks):
-            chunks += 1
-            before = int(run.state.episodes)
-            state, curve = trainer.train_chunk(run.state, run.chunk_updates)
-            record_chunk(run, state, jax.device_get(curve), time.perf_counter() - start)
-            advance(min(int(state.episodes), total) - min(before, total), **status(run))
+        try:
+            while not bool(trainer.done(run.state)) and (stop_after_chunks is None or chunks < stop_after_chunks):
+                chunks += 1
+                before = int(run.state.episodes)
+                state, curve = trainer.train_chunk(run.state, run.chunk_updates)
+                record_chunk(run, state, jax.device_get(curve), time.perf_counter() - start)
+                advance(min(int(state.episodes), total) - min(before, total), **status(run))
+        finally:
+            checkpoint(run)
     return finish_run(run, time.perf_counter() - start)
 
 

@@ -6,11 +6,11 @@ import jax
 import numpy as np
 import pytest
 
+from worldagent.agents import training
 from worldagent.agents.acktr import ACKTRConfig
 from worldagent.agents.algorithms import ALGORITHMS, get_algorithm, training_config
 from worldagent.agents.dqn import DQNConfig
 from worldagent.agents.ppo import PPOConfig
-from worldagent.agents import training
 from worldagent.agents.training import CHECKPOINT_FILE, plotted_metrics, train
 from worldagent.envs import registry
 from worldagent.envs.racing.metrics import normalised_return, racing_return_bounds

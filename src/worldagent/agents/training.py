@@ -14,9 +14,10 @@ from its last checkpoint and ends where the uninterrupted run would have. At the
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -217,7 +218,7 @@ class OpenRun:
     chunk_updates: int
     distribution: Any = None
     checkpointed: int | None = None
-    checkpoint_clock: float = field(default_factory=time.perf_counter)
+    checkpoint_clock: float = dataclasses.field(default_factory=time.perf_counter)
 
 
 def _check_chunk_updates(config, chunk_updates: int | None) -> int:
@@ -265,7 +266,9 @@ def open_run(
     out_dir.mkdir(parents=True, exist_ok=True)
     write_bytes(out_dir / RUN_FILE, json.dumps(record, indent=1).encode())
     offset = rows[-1]["wall_seconds"] if rows else 0.0
-    return OpenRun(spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates, distribution, resumed_from)
+    return OpenRun(
+        spec, algorithm, config, out_dir, record, env, trainer, state, rows, resumed_from, offset, chunk_updates, distribution, resumed_from
+    )
 
 
 def record_chunk(run: OpenRun, state: Any, curve: dict, elapsed: float) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import re
 
@@ -206,3 +207,13 @@ def test_agents_that_failed_to_learn_are_flagged_in_the_report(racing_run):
     flags = re.findall(r"data-flag='failed-training'>Warning: the (\S+) agent", page)
     assert flags == ["default-s0", "influenced-s0"]
     assert "WARNING: the influenced-s0 agent laps in only" in Manifest.read(out).data["phases"]["racing/influence"]["outputs"]["summary"]
+
+
+def test_the_report_says_how_both_influence_arms_trained(racing_run):
+    out, _ = racing_run
+    result = json.loads((out / "racing" / "influence" / "influence.json").read_text())
+    shown = html.unescape(re.search(r"data-field='influence-regime'>Both arms' training: (.*?)\.</p>", (out / "report.html").read_text()).group(1))
+    assert shown.startswith(f"{result['algo']}, {result['config']['episodes']} episodes each; beside {result['algo']}'s defaults: ")
+    changed = result["config"]["training"]["num_envs"]  # the tiny preset's train_envs, not the algorithm's 16
+    assert f"num_envs {changed}" in shown and changed != 16
+    assert "gamma" not in shown  # a setting left at the algorithm's default is not listed

@@ -22,6 +22,7 @@ from pathlib import Path
 from worldagent.envs import registry
 from worldagent.files import write_text
 from worldagent.reports.curriculum import curriculum_section
+from worldagent.reports.influence import training_regime
 from worldagent.reports.page import CSS, esc, fmt, image, missing, number, phase_state, section, table
 from worldagent.reports.provenance import overview
 from worldagent.reports.results import Headline, env_results, headlines
@@ -233,6 +234,7 @@ def influence_section(run_dir: Path, results: dict) -> str:
             failed + f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
             f"became the influenced training distribution; agents trained with seeds {esc(', '.join(map(str, result['config']['seeds'])))}, "
             f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
+            f"<p data-field='influence-regime'>Both arms' training: {esc(training_regime(result))}.</p>"
             + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)
             + image(
                 res["layout"].figure("influence"),

@@ -44,6 +44,20 @@ def world_image(spec: str | EnvSpec, world: Any, size: int = 192) -> np.ndarray:
     return np.asarray(registry.get(spec).pictures.world(world, size).convert("RGB"))
 
 
+def training_regime(result: dict) -> str:
+    """How an influence result's agents trained, in words: the algorithm, the episodes of each agent
+    and the settings that differ from the algorithm's own defaults (``agents.algorithms``)."""
+    from worldagent.agents.algorithms import get_algorithm
+    from worldagent.influence.cache import config_dict
+
+    algo, config = result["algo"], result["config"]
+    defaults = config_dict(get_algorithm(algo).config_type())
+    budgets = ("total_episodes", "num_episodes")  # the episodes, said first
+    changed = [f"{name} {value}" for name, value in config["training"].items() if name not in budgets and defaults.get(name) != value]
+    episodes = next((config["training"][name] for name in budgets if name in config["training"]), config.get("episodes"))
+    return f"{algo}, {episodes:,} episodes each" + (f"; beside {algo}'s defaults: {', '.join(changed)}" if changed else f"; {algo}'s defaults")
+
+
 def _interval(entry: dict) -> float:
     """The CI half-width; NaN (no error bar drawn) when unknown (one seed: NaN in memory, null in JSON)."""
     value = entry.get("ci95")

@@ -121,6 +121,11 @@ def train_arm(spec, algo, config, options, curriculum, seeds, work: Path, progre
 def link_default_agents(run_dir: Path, dr_dirs: list[str], seeds, source: str = "the dr arm's agent") -> None:
     """Make the ``dr`` arm's agents the influence experiment's default agents: the same algorithm,
     config, G(z) and seeds, so training them again would only repeat them (``source`` says whose)."""
+    unfinished = [d for d in dr_dirs if not (Path(d) / "policy").is_dir()]
+    if unfinished:  # linking one would let this run train into another run's directory
+        raise SystemExit(
+            f"{', '.join(unfinished)}: not a trained agent (no policy/) yet; finish training it, then rerun (the steps so far are cached)."
+        )
     for seed, trained in zip(seeds, dr_dirs):
         link = run_dir / "agents" / f"default-s{seed}"
         if not link.exists():

@@ -43,8 +43,8 @@ another regime or budget than the default works under ``--work/regime-<name>-e<e
    them (8 episodes each, the same keys for both): worlds neither was selected or trained on
    (the default arm trains on G(z), where any track may come up).
 
-Writes ``benchmarks/results/influence-racing.json`` (``influence-racing-<regime>-<selection>.json``
-for another regime, budget or selection; ``--results`` to choose): the regime and every setting
+Records the run in ``benchmarks/results/influence-racing.json`` (``--results`` to choose) under
+``runs["<regime>-e<episodes>-<selection>"]``, beside the other regimes' runs: the regime and every setting
 that differs from the paper's, the given agent's own rates, per-seed values, means with 95%
 intervals (Student t over seeds) and whether they overlap, the selection, its size and how many
 distinct tracks it holds, steps per lap, the held-out evaluation, the agents that failed to
@@ -91,6 +91,12 @@ PAPER_SELECTION = "crash_rate > 0.5"
 FALLBACK_SELECTION = "crash_rate > 0"
 OUR_SELECTION = "lap_completed < 0.5"  # issue 26, item 2: the agent's own failure (its training check's threshold)
 SELECTIONS = {"paper": PAPER_SELECTION, "ours": OUR_SELECTION}  # --selection's names (and "auto")
+# The paper's racing influence result (§6.2.1, Figure 8a) and its random worlds' rewards (§6.1).
+PAPER_NUMBERS = {
+    "crashed": {"default": 0.11, "influenced": 0.04},
+    "reward_change_pct": -5.0,
+    "random": {"mean_normalised": 0.87, "min": 0.13, "max": 0.99},
+}
 MIN_DISTINCT = 50  # issue 13: the influenced distribution holds at least this many distinct tracks
 HELDOUT_SEED = 1000  # seed of the held-out atlas and episode keys: HELDOUT_SEED + the source seed
 EPISODE_METRICS = ("crashed", "lap_completed", "steps", "normalised_return", "return")
@@ -277,6 +283,14 @@ def slug(text: str) -> str:
     return re.sub(r"[^a-z0-9.]+", "-", text.lower()).strip("-")
 
 
+def record_run(path: Path, key: str, payload: dict) -> Path:
+    """Write ``payload`` as ``runs[key]`` of the results file, keeping the other runs (regimes, selections) it holds."""
+    runs = json.loads(path.read_text()).get("runs", {}) if path.is_file() else {}
+    runs[key] = payload
+    document = {"benchmark": "influence-racing", "paper": PAPER_NUMBERS, "runs": dict(sorted(runs.items()))}
+    return write_text(path, json.dumps(json_safe(document), indent=2, default=float) + "\n")
+
+
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--algo", choices=SPEC.algorithms, default="acktr", help="the paper's: acktr")
@@ -406,11 +420,6 @@ def main(argv=None) -> dict:
         "reward_change_pct": round(100 * (reward["influenced"]["mean"] / reward["default"]["mean"] - 1), 2),
         "heldout": held,
         "failed_training": failed_training,
-        "paper": {
-            "crashed": {"default": 0.11, "influenced": 0.04},
-            "reward_change_pct": -5.0,
-            "random": {"mean_normalised": 0.87, "min": 0.13, "max": 0.99},
-        },
         "generator": str(gen_dir),
         "default_agents": args.default_agents or "trained here",
         "wall_seconds": round(time.perf_counter() - started, 1),
@@ -418,9 +427,8 @@ def main(argv=None) -> dict:
         "work": str(base),
     }
     machine = describe_machine()
-    payload = {"benchmark": "influence-racing", "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": machine, **figures}
-    name = "influence-racing.json" if default_run and args.selection == "auto" else f"influence-racing-{regime.name}-e{episodes}{tag or '-auto'}.json"
-    path = write_text(args.results or RESULTS / name, json.dumps(json_safe(payload), indent=2, default=float) + "\n")
+    payload = {"when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": machine, **figures}
+    path = record_run(args.results or RESULTS / "influence-racing.json", f"{regime.name}-e{episodes}{tag or '-auto'}", payload)
     own = reach["given_agent"]
     lines = [
         f"regime {regime.name} ({episodes} episodes): given agent crash {own['crash_rate']:.4f}, lap {own['lap_rate']:.4f}"

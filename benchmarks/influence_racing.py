@@ -91,11 +91,11 @@ PAPER_SELECTION = "crash_rate > 0.5"
 FALLBACK_SELECTION = "crash_rate > 0"
 OUR_SELECTION = "lap_completed < 0.5"  # issue 26, item 2: the agent's own failure (its training check's threshold)
 SELECTIONS = {"paper": PAPER_SELECTION, "ours": OUR_SELECTION}  # --selection's names (and "auto")
-# The paper's racing influence result (§6.2.1, Figure 8a) and its random worlds' rewards (§6.1).
+# The paper's racing influence result (§6.2.1, Figure 8a) and its random worlds' rewards (§6.1), from the spec.
 PAPER_NUMBERS = {
-    "crashed": {"default": 0.11, "influenced": 0.04},
-    "reward_change_pct": -5.0,
-    "random": {"mean_normalised": 0.87, "min": 0.13, "max": 0.99},
+    "crashed": {label: SPEC.paper[f"influence.crashed.{label}"] for label in ("default", "influenced")},
+    "reward_change_pct": SPEC.paper["influence.reward_change_pct"],
+    "random": {"mean_normalised": SPEC.paper["random.mean_normalised"], "min": SPEC.paper["min.normalised"], "max": SPEC.paper["max.normalised"]},
 }
 MIN_DISTINCT = 50  # issue 13: the influenced distribution holds at least this many distinct tracks
 HELDOUT_SEED = 1000  # seed of the held-out atlas and episode keys: HELDOUT_SEED + the source seed

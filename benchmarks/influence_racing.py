@@ -24,7 +24,9 @@ another regime or budget than the default works under ``--work/regime-<name>-e<e
 
 1. the generator G(z): ``--generator`` if it holds one, else the paper preset's dataset and VAE
    made under ``--work``;
-2. the given agent: ``--algo`` trained ``--episodes`` on the procedural dataset pool (paper §5.3);
+2. the given agent, whose failures select the worlds: ``--algo`` trained ``--episodes`` on the
+   procedural dataset pool (paper §5.3), or ``--given-agent``, one already trained in the regime
+   (e.g. the default arm's seed 0, trained on G(z); its steps then live under ``given-<path>/``);
 3. the paper's selection, ``crash_rate > 0.5``: how many *distinct* tracks the given agent
    crashes on in more than half of its episodes, among ``--candidates`` random worlds and in a
    crash-maximising CMA-ME atlas of ``--atlas-budget`` worlds; and a census of every dataset
@@ -157,17 +159,22 @@ def paper_selection_reach(work: Path, setup, candidates: int, atlas_budget: int,
         }
 
 
-def dataset_census(gen_dir: Path, setup, repeats: int) -> dict:
-    """How many of the generator's dataset tracks (G(z)'s whole range after repair) meet each crash-rate threshold."""
+def dataset_census(gen_dir: Path, setup, repeats: int, cache: Path) -> dict:
+    """How many of the generator's dataset tracks (G(z)'s whole range after repair) meet each crash-rate threshold
+    (kept in ``cache``: 10,000 tracks x 8 episodes is minutes of work)."""
+    if cache.is_file():
+        return json.loads(cache.read_text())
     data = load_generator(gen_dir)[2]
     crashed = evaluate(setup.env, setup.policy, data.worlds, repeats, jax.random.key(0), setup.params)["crashed"]
     rate = np.asarray(crashed, np.float64).mean(axis=1)
-    return {
+    census = {
         "tracks": len(rate),
         "repeats": repeats,
         "crash_rate_mean": round(float(rate.mean()), 4),
         "tracks_with_crash_rate_above": {str(t): int((rate > t).sum()) for t in (0.0, 0.125, 0.25, 0.375, 0.5)},
     }
+    write_text(cache, json.dumps(census, indent=1))
+    return census
 
 
 def eval_campaign(name: str, result: dict) -> str:
@@ -326,6 +333,13 @@ def main(argv=None) -> dict:
         help="agents already trained in this regime on --generator's G(z), one per --seeds in order (e.g. the curriculum "
         "benchmark's dr arm): the default arm links them instead of training them again",
     )
+    parser.add_argument(
+        "--given-agent",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="an agent already trained in this regime whose failures select the worlds (default: trained here on the procedural pool)",
+    )
     parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
@@ -343,10 +357,16 @@ def main(argv=None) -> dict:
     base = args.work if default_run else args.work / f"regime-{regime.name}-e{episodes}"
     base.mkdir(parents=True, exist_ok=True)
     gen_dir = generator_dir(args.work, args.generator, progress)
-    agent_dir = given_agent(base, args.algo, config, progress)
+    if args.given_agent is not None:
+        if not (args.given_agent / "policy").is_dir():
+            parser.error(f"--given-agent {args.given_agent}: not a trained agent (no policy/); finish training it first")
+        agent_dir, base = args.given_agent, base / f"given-{slug(str(args.given_agent))}"
+        base.mkdir(parents=True, exist_ok=True)
+    else:
+        agent_dir = given_agent(base, args.algo, config, progress)
     setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=OPTIONS)
     reach = paper_selection_reach(base, setup, args.candidates, args.atlas_budget, progress)
-    reach["dataset_census"] = dataset_census(gen_dir, setup, setup.repeats)
+    reach["dataset_census"] = dataset_census(gen_dir, setup, setup.repeats, base / "dataset-census.json")
     enough = reach["random"]["distinct"] + reach["atlas"]["distinct"] >= MIN_DISTINCT  # an upper bound: the two may share tracks
     if args.selection == "auto":
         selection = PAPER_SELECTION if enough else FALLBACK_SELECTION
@@ -402,7 +422,11 @@ def main(argv=None) -> dict:
             "repeats": setup.repeats,
             "heldout_search_budget": args.heldout_search_budget if heldout else None,
         },
-        "given_agent": reach["given_agent"],
+        "given_agent": {
+            **reach["given_agent"],
+            "dir": str(agent_dir),
+            "trained": "here, on the procedural pool" if args.given_agent is None else "given",
+        },
         "paper_selection_reach": reach,
         "selection": {
             **result["selection"],

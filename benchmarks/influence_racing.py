@@ -75,6 +75,7 @@ from worldagent import experiments  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
+from worldagent.evaluation.backends import BACKENDS, make_backend  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
 from worldagent.influence.cache import load_influenced_worlds  # noqa: E402
@@ -341,6 +342,9 @@ def main(argv=None) -> dict:
         help="an agent already trained in this regime whose failures select the worlds (default: trained here on the procedural pool)",
     )
     parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
+    parser.add_argument(
+        "--backend", choices=BACKENDS, default="local", help="ray: each program of agents trains on a worker of a local Ray cluster, side by side"
+    )
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     progress, started = not args.quiet, time.perf_counter()
@@ -364,7 +368,7 @@ def main(argv=None) -> dict:
         base.mkdir(parents=True, exist_ok=True)
     else:
         agent_dir = given_agent(base, args.algo, config, progress)
-    setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=OPTIONS)
+    setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=OPTIONS, backend=make_backend(args.backend))
     reach = paper_selection_reach(base, setup, args.candidates, args.atlas_budget, progress)
     reach["dataset_census"] = dataset_census(gen_dir, setup, setup.repeats, base / "dataset-census.json")
     enough = reach["random"]["distinct"] + reach["atlas"]["distinct"] >= MIN_DISTINCT  # an upper bound: the two may share tracks

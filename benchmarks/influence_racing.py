@@ -43,7 +43,10 @@ another regime or budget than the default works under ``--work/regime-<name>-e<e
    atlas search of ``--heldout-search-budget`` worlds toward the selection, less any track of the
    influenced training worlds; seed k+1's (mod n) default and influenced agents are evaluated on
    them (8 episodes each, the same keys for both): worlds neither was selected or trained on
-   (the default arm trains on G(z), where any track may come up).
+   (the default arm trains on G(z), where any track may come up);
+7. the selected tracks replayed: every trained agent, 8 episodes on each distinct track of the
+   influenced training worlds (the same keys for all): whether they are hard for agents other than
+   the one that selected them, and whether the influenced agents learned them.
 
 Records the run in ``benchmarks/results/influence-racing.json`` (``--results`` to choose) under
 ``runs["<regime>-e<episodes>-<selection>"]``, beside the other regimes' runs: the regime and every setting
@@ -101,6 +104,7 @@ PAPER_NUMBERS = {
     "random": {"mean_normalised": SPEC.paper["random.mean_normalised"], "min": SPEC.paper["min.normalised"], "max": SPEC.paper["max.normalised"]},
 }
 MIN_DISTINCT = 50  # issue 13: the influenced distribution holds at least this many distinct tracks
+SELECTED_SEED = 2000  # episode keys of step 7 (the selected tracks replayed)
 HELDOUT_SEED = 1000  # seed of the held-out atlas and episode keys: HELDOUT_SEED + the source seed
 EPISODE_METRICS = ("crashed", "lap_completed", "steps", "normalised_return", "return")
 
@@ -286,6 +290,27 @@ def heldout_evaluation(influence_dir: Path, setup, result: dict, selection_text:
     }
 
 
+def selected_world_rates(influence_dir: Path, setup, result: dict) -> dict:
+    """Step 7: every trained agent on the influenced training worlds (one per distinct track, 8 episodes,
+    one key for all): are the selected tracks hard for agents other than the one that selected them,
+    and did the influenced agents learn to drive them?"""
+    unique = {world_key(w): w for w in per_world(load_influenced_worlds(influence_dir, SPEC)[0])}
+    dirs = {name: influence_dir / "agents" / name / record["policy"] for name, record in result["agents"].items()}
+    policies = trained_policies(dirs, SPEC, greedy=False)
+    batch, key = SPEC.stack_worlds(list(unique.values())), jax.random.key(SELECTED_SEED)
+    per_seed: dict[str, dict[str, dict]] = {}
+    for name, policy in policies.items():
+        label, seed = name.rsplit("-s", 1)
+        metrics = SPEC.metrics.with_derived(evaluate(setup.env, policy, batch, REPEATS, key, setup.params), setup.params)
+        per_seed.setdefault(label, {})[seed] = episode_summary(metrics)
+    return {
+        "tracks": len(unique),
+        "repeats": REPEATS,
+        "per_seed": per_seed,
+        "summary": summary_over_seeds(per_seed, ("crash_rate", "lap_rate", "normalised_return")),
+    }
+
+
 def slug(text: str) -> str:
     """A selection's text as a file-name part."""
     return re.sub(r"[^a-z0-9.]+", "-", text.lower()).strip("-")
@@ -407,6 +432,7 @@ def main(argv=None) -> dict:
     summary_trained = summarise(trained, list(result["summary"]))
     heldout = args.heldout == "on" or (args.heldout == "auto" and selection == OUR_SELECTION)
     held = heldout_evaluation(influence_dir, setup, result, selection, args.heldout_search_budget, progress) if heldout else None
+    replayed = selected_world_rates(influence_dir, setup, result)
     given_why = SPEC.training_check({"lap_completed": reach["given_agent"]["lap_rate"]})
     failed_training = {**({"given-s0": given_why} if given_why else {}), **result["failed_training"]}
     reward = summary["return"]
@@ -447,6 +473,7 @@ def main(argv=None) -> dict:
         "without_failed_training": {"summary": summary_trained, "intervals": comparison(summary_trained)},
         "reward_change_pct": round(100 * (reward["influenced"]["mean"] / reward["default"]["mean"] - 1), 2),
         "heldout": held,
+        "selected_worlds_replayed": replayed,
         "failed_training": failed_training,
         "generator": str(gen_dir),
         "default_agents": args.default_agents or "trained here",
@@ -473,6 +500,9 @@ def main(argv=None) -> dict:
         for metric in ("crash_rate", "lap_rate"):
             d, i = held["summary"][metric]["default"], held["summary"][metric]["influenced"]
             lines.append(f"held out {metric}: {d['mean']:.4f} ± {d['ci95']:.4f} -> {i['mean']:.4f} ± {i['ci95']:.4f} ({d['seeds']} seeds)")
+    for metric in ("crash_rate", "lap_rate"):
+        d, i = replayed["summary"][metric]["default"], replayed["summary"][metric]["influenced"]
+        lines.append(f"selected tracks replayed, {metric}: {d['mean']:.4f} ± {d['ci95']:.4f} -> {i['mean']:.4f} ± {i['ci95']:.4f}")
     if failed_training:
         lines.append("failed training: " + ", ".join(failed_training))
     print("\n".join(lines) + f"\nrecorded in {path}")

@@ -478,7 +478,8 @@ def main(argv=None) -> dict:
         "generator": str(gen_dir),
         "default_agents": args.default_agents or "trained here",
         "wall_seconds": round(time.perf_counter() - started, 1),
-        "influence_wall_seconds": result["wall_seconds"],
+        "influence_wall_seconds": result["wall_seconds"],  # this process's: a rerun of cached steps times ~0
+        "training_seconds": {name: record["wall_seconds"] for name, record in result["agents"].items()},  # each agent's own record
         "work": str(base),
     }
     machine = describe_machine()

@@ -217,6 +217,11 @@ def test_repair_settings_are_refused_before_the_vae_trains(tmp_path):
     line = one_line(runner.invoke(app, ["generator", "train", "harvest", "--out", str(out), "--n", "8", "--repair", "apples=many", "--quiet"]))
     assert "harvest's repair refuses its settings (apples='many')" in line and "fix or drop --repair" in line
     assert sorted(p.name for p in out.iterdir()) == ["dataset.npz"]
+    out = tmp_path / "named"
+    line = one_line(runner.invoke(app, ["generator", "train", "racing", "--out", str(out), "--n", "8", "--repair", "closest", "--quiet"]))
+    assert "racing has no repair 'closest'; use one of: nearest, open" in line and not out.exists()
+    line = one_line(runner.invoke(app, ["generator", "train", "racing", "--out", str(out), "--repair", "open", "--repair", "nearest", "--quiet"]))
+    assert "name one repair (e.g. --repair open)" in line and not out.exists()
 
 
 def test_envs_lists_descriptors_failure_and_presets():
@@ -227,6 +232,7 @@ def test_envs_lists_descriptors_failure_and_presets():
     assert "wall_share (default)" in text and "apple_clustering (default)" in text and "largest_patch" in text
     assert "failure:     crash_rate > 0.5" in text
     assert "presets:     paper (10,000 worlds, 10,000 episodes)" in text and "tiny (256 worlds, 4 episodes)" in text
+    assert "repairs:     nearest (default): Repair by the nearest dataset world; open: New valid tracks" in text
 
 
 def help_text(*command: str) -> str:

@@ -142,3 +142,23 @@ def test_self_mapping_agrees_with_the_nearest_world_indices(racing_generator, ra
     own = np.asarray(racing_generator.repair.indices(racing_generator.logits(racing_generator.encode(subset.cells))))
     rate = _self_mapping_rate(racing_generator, subset, registry.get("racing"))
     assert rate >= np.mean(own == np.arange(64)) and rate * 64 == pytest.approx(round(rate * 64))
+
+
+def test_a_named_repair_is_recorded_and_loaded_by_name(tmp_path, racing_vae, racing_data):
+    open_generator = build_generator(racing_vae, racing_data, repair_name="open")
+    z = jax.random.normal(jax.random.key(7), (6, open_generator.latent_dim))
+    tracks = open_generator(z)
+    tracks.validate()
+    dataset = {row.tobytes() for row in racing_data.cells}
+    assert not any(row.tobytes() in dataset for row in registry.get("racing").cells(tracks))  # open: none is a dataset track
+    save_generator(tmp_path / "g", racing_vae, racing_data.save(tmp_path / "data.npz"), open_generator)
+    assert json.loads((tmp_path / "g" / "generator.json").read_text())["repair_name"] == "open"
+    loaded = load_generator(tmp_path / "g")[0]
+    assert loaded.repair_name == "open"
+    np.testing.assert_array_equal(loaded(z).raster, tracks.raster)
+    assert build_generator(racing_vae, racing_data).repair_name == "nearest"  # the paper's stays the default
+
+
+def test_an_unknown_repair_name_lists_the_known_ones(racing_vae, racing_data):
+    with pytest.raises(WorldagentError, match="no repair 'closest'; use one of: nearest, open"):
+        build_generator(racing_vae, racing_data, repair_name="closest")

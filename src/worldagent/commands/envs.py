@@ -27,6 +27,7 @@ def describe(name: str) -> str:
             if spec.failure
             else []
         ),
+        f"  repairs:     {repair_line(spec)}",
         f"  algorithms:  {algorithms}",
         f"  policies:    {', '.join(spec.scripted) or 'none'} (scripted, for --agent)",
         f"  presets:     {preset_line(spec.presets)}",
@@ -38,6 +39,20 @@ def descriptor_line(metrics) -> str:
     """``total_curvature (default), ..., track_length (for atlas --descriptors)``."""
     named = [f"{name} (default)" if name in metrics.default_descriptors else name for name in metrics.descriptors]
     return f"{', '.join(named)} (for atlas --descriptors)" if named else "none (no failure atlas)"
+
+
+def repair_line(spec) -> str:
+    """``nearest (default): ...; open: ... (for generator train --repair)``: each repair and the first line of its doc."""
+    from worldagent.envs.registry import DEFAULT_REPAIR
+
+    def summary(name: str) -> str:
+        factory = spec.repair_factory(name)
+        doc = (getattr(factory, "__self__", factory).__doc__ or "").strip()
+        return doc.splitlines()[0].rstrip(".") if doc else ""
+
+    marked = lambda name: f"{name} (default)" if name == spec.default_repair and name != DEFAULT_REPAIR else name  # noqa: E731
+    named = [f"{marked(name)}: {summary(name)}" if summary(name) else marked(name) for name in spec.repair_names]
+    return "; ".join(named) + " (for generator train --repair)"
 
 
 def preset_line(presets) -> str:

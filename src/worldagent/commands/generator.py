@@ -12,27 +12,33 @@ from worldagent.errors import WorldagentError
 from worldagent.files import check_writable
 
 QUALITY_FILE = "quality.json"
+TRAIN_SAMPLES = 1000  # draws z ~ N(0, I) for the figures `generator train` prints
 
 
-def repair_settings(texts: list[str]) -> dict:
-    """``--repair NAME=VALUE`` texts as a dict; values read as int, then float, else kept as text."""
-    settings = {}
+def repair_settings(texts: list[str]) -> tuple[str | None, dict]:
+    """``--repair`` texts as (the repair's name or None, its settings): a bare word names the repair
+    (``--repair open``), ``NAME=VALUE`` sets one of its settings, read as int, then float, else text."""
+    chosen, settings = None, {}
     for text in texts:
         name, sep, value = text.partition("=")
+        if not sep and name.strip() and chosen is None:
+            chosen = name.strip()
+            continue
         if not sep or not name.strip():
-            raise WorldagentError(f"--repair {text!r}: write NAME=VALUE, e.g. --repair apples=40 (harvest).")
+            raise WorldagentError(f"--repair {text!r}: name one repair (e.g. --repair open) and write settings as NAME=VALUE, e.g. --repair apples=40.")
         for kind in (int, float, str):
             try:
                 settings[name.strip()] = kind(value.strip())
                 break
             except ValueError:
                 continue
-    return settings
+    return chosen, settings
 
 
-def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed: int, config, repair: dict, progress: bool):
-    """Train the VAE (resuming a checkpoint in ``out``), save G(z); returns (the trained VAE, the
-    repair's settings, defaults included). The repair is made first: bad settings cost no training."""
+def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed: int, config, repair: dict, progress: bool, repair_name: str | None = None):
+    """Train the VAE (resuming a checkpoint in ``out``), save G(z) with the repair called
+    ``repair_name`` (None: the env's default); returns (the trained VAE, the repair's settings,
+    defaults included). The repair is made first: a bad name or settings cost no training."""
     from worldagent.worlds.dataset import WorldDataset, make_dataset
     from worldagent.worlds.generator import build_generator, make_repair, save_generator
     from worldagent.worlds.vae import train_vae
@@ -42,9 +48,9 @@ def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed
         if not dataset_path.exists():
             make_dataset(env, n, seed, progress=progress).save(dataset_path)
     data = WorldDataset.load(dataset_path, env=env)
-    repaired = make_repair(data, repair)
+    repaired = make_repair(data, repair, repair_name)
     vae = train_vae(data, config, progress=progress, checkpoint_dir=out)
-    save_generator(out, vae, dataset_path, build_generator(vae, data, repair=repaired))
+    save_generator(out, vae, dataset_path, build_generator(vae, data, repair=repaired, repair_name=repair_name))
     return vae, dict(repaired.config)
 
 
@@ -53,20 +59,41 @@ def quality_figures(directory: Path, samples: int, seed: int) -> dict:
     import jax
 
     from worldagent.worlds.generator import load_generator
-    from worldagent.worlds.quality import figures, reconstruction
+    from worldagent.worlds.quality import diagnose, figures, reconstruction
     from worldagent.worlds.vae import split_holdout
 
     if samples < 1:
         raise WorldagentError(f"--samples {samples}; draw at least 1 latent.")
     generator, vae, data = load_generator(directory)
     train, held = split_holdout(len(data), vae.config.holdout, vae.config.seed)
+    recon = reconstruction(generator, data, held, train)
+    measured = figures(generator, data, samples, jax.random.key(seed))
     return {
         "env": data.env,
         "worlds": len(data),
-        "reconstruction": reconstruction(generator, data, held, train),
-        data.env: figures(generator, data, samples, jax.random.key(seed)),
+        "reconstruction": recon,
+        data.env: measured,
         "training": {"epochs": len(vae.history), "final": vae.history[-1]},
+        "warnings": diagnose(recon, measured, len(data)),
     }
+
+
+def key_figures(quality: dict) -> str:
+    """One line of the figures that say whether search can use the generator (``quality_figures``' dict)."""
+    measured, recon = quality[quality["env"]], quality["reconstruction"]
+    latent, moves = measured["latent"], measured["sensitivity"]["mean_changed_world_share"]
+    spreads = ", ".join(f"{name} {row['spread_ratio']:.2f}" for name, row in measured["structure"].items() if row.get("spread_ratio") is not None)
+    return (
+        f"KL {latent['kl_total']:.2f} nats, {latent['active_units']}/{len(latent['kl_per_dim'])} active units; "
+        f"held-out NLL {recon['vae']['nll_per_world']:.1f} (mean world {recon['mean_image']['nll_per_world']:.1f}); "
+        f"{measured['coverage_distinct_worlds']:,}/{measured['samples']:,} distinct decodes; a ±1 move along z changes {moves:.0%} of worlds"
+        + (f"; spread under G(z) / dataset: {spreads}" if spreads else "")
+    )
+
+
+def print_warnings(warnings: list[str]) -> None:
+    for line in warnings:
+        console.print(f"[yellow]warning[/yellow]: {line}", highlight=False)
 
 
 def structure_table(structure: dict) -> str:
@@ -96,26 +123,41 @@ def register(app: typer.Typer) -> None:
         latent: int = typer.Option(10, "--latent", help="Latent dimensions (the paper: 10)."),
         learning_rate: float = typer.Option(1e-3, "--lr", help="Adam step size."),
         batch_size: int = typer.Option(128, "--batch-size", help="Worlds per minibatch."),
-        repair: list[str] = typer.Option([], "--repair", help="A setting of the env's repair NAME=VALUE, e.g. apples=40 (harvest; repeatable)."),
+        free_bits: float = typer.Option(
+            None, "--free-bits", help="Per-dimension KL floor λ, nats (Kingma et al. 2016) against collapse (default 0.5; 0: plain ELBO)."
+        ),
+        repair: list[str] = typer.Option(
+            [],
+            "--repair",
+            help="The repair by name (e.g. open: new valid worlds; nearest: the paper's, dataset worlds only; `worldagent envs` lists them) "
+            "and its settings NAME=VALUE, e.g. apples=40 (harvest; repeatable).",
+        ),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
     ) -> None:
         """Train the VAE of G(z) on a dataset of worlds and save the generator (paper §4.2, Figure 3)."""
+        from dataclasses import replace
+
         from worldagent.envs import registry
         from worldagent.worlds.vae import VAEConfig
 
         registry.get(env)  # an unknown environment fails before anything is written
-        settings = repair_settings(repair)
+        repair_name, settings = repair_settings(repair)
+        registry.get(env).repair_factory(repair_name)  # an unknown repair fails before anything is written
         if epochs is None:
             epochs = registry.get(env).presets.get("paper", {}).get("vae_epochs", VAEConfig.epochs)
         config = VAEConfig(latent_dim=latent, beta=beta, learning_rate=learning_rate, batch_size=batch_size, epochs=epochs)
+        config = config if free_bits is None else replace(config, free_bits=free_bits)
         config.validate()
         check_counts(caps={"n": DATASET_CAP}, n=n)
         check_seed(seed)
         check_writable(out, folder=True)
-        vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet)
+        vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet, repair_name=repair_name)
         last = vae.history[-1]
-        repair_note = ", ".join(f"{name}={value}" for name, value in used.items()) or "no settings"
+        repair_note = (repair_name or registry.get(env).default_repair) + "".join(f", {name}={value}" for name, value in used.items())
         console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}; repair: {repair_note}")
+        quality = quality_figures(out, TRAIN_SAMPLES, 0)  # a quick look (~1,000 decodes); `generator report` measures more
+        console.print(key_figures(quality), highlight=False)
+        print_warnings(quality["warnings"])
 
     @group.command("show")
     @friendly_errors
@@ -157,3 +199,5 @@ def register(app: typer.Typer) -> None:
         write_text(directory / QUALITY_FILE, json.dumps(figures, indent=1))
         typer.echo(json.dumps(figures, indent=1))
         typer.echo(structure_table(figures[figures["env"]]["structure"]))
+        console.print(key_figures(figures), highlight=False)
+        print_warnings(figures["warnings"])

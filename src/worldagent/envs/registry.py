@@ -28,6 +28,7 @@ import numpy as np
 from worldagent.errors import WorldagentError
 
 ENTRY_POINT_GROUP = "worldagent.envs"
+DEFAULT_REPAIR = "default"  # the name of an env's only repair
 BUILTIN = ("worldagent.envs.racing.spec", "worldagent.envs.harvest.spec")
 
 
@@ -156,8 +157,13 @@ class EnvSpec:
         cells: ``batched world -> uint8[N, D]``, the VAE's binary input.
         cell_shape: one world's cells before flattening (pictures, the VAE's output).
         repair: ``(dataset, config) -> Repair``: the step that makes decoded cells a valid world
-            (paper §4.2). A ``Repair`` is a pytree with ``__call__(logits f32[B, D]) -> worlds[B]``
-            (pure, jittable) and a JSON-able ``config`` dict that rebuilds it (``generator.json``).
+            (paper §4.2), the default one. A ``Repair`` is a pytree with ``__call__(logits f32[B, D])
+            -> worlds[B]`` (pure, jittable) and a JSON-able ``config`` dict that rebuilds it
+            (``generator.json``).
+        repairs: ``name -> (dataset, config) -> Repair``: the repairs a generator may be trained
+            with by name (``generator train --repair NAME``), ``repair`` among them; e.g. racing's
+            ``nearest`` (the paper's: G(z) returns dataset worlds only) and ``open`` (new valid
+            worlds). Empty: ``repair`` alone, called ``default``.
         metrics: see ``Metrics``.
         trace: ``state -> (positions, present)``: where the agents are (to draw trajectories).
         pictures: see ``Pictures``.
@@ -215,6 +221,7 @@ class EnvSpec:
     paper: Mapping[str, float] = field(default_factory=dict)
     episode_note: Callable[[dict], str] | None = None
     raw_decode: Callable[[Any], Any] | None = None
+    repairs: Mapping[str, Callable[[Any, Mapping[str, Any]], Any]] = field(default_factory=dict)
 
     @property
     def default_algorithm(self) -> str:
@@ -226,6 +233,26 @@ class EnvSpec:
     @property
     def cell_count(self) -> int:
         return int(np.prod(self.cell_shape))
+
+    # -- repairs ----------------------------------------------------------------------------
+
+    @property
+    def repair_names(self) -> tuple[str, ...]:
+        """The names ``generator train --repair NAME`` takes, the default's first."""
+        return (self.default_repair, *(name for name in self.repairs if name != self.default_repair))
+
+    @property
+    def default_repair(self) -> str:
+        """The name of ``repair`` (``default`` when it has none in ``repairs``)."""
+        return next((name for name, make in self.repairs.items() if make == self.repair), DEFAULT_REPAIR)  # == : bound classmethods are new objects each time
+
+    def repair_factory(self, name: str | None = None) -> Callable[[Any, Mapping[str, Any]], Any]:
+        """The repair called ``name`` (None: the default); unknown names list the known ones."""
+        if name is None or name == self.default_repair:
+            return self.repair
+        if name not in self.repairs:
+            raise WorldagentError(f"{self.name} has no repair {name!r}; use one of: {', '.join(self.repair_names)}.")
+        return self.repairs[name]
 
     # -- options -----------------------------------------------------------------------------
 

@@ -11,7 +11,10 @@ The repair step is the environment's (``registry.get(env).repair(dataset, config
 module never asks which environment it serves.
 
 On a generator directory (``save``/``load``): ``vae.msgpack`` + ``vae.json`` (the VAE) and
-``generator.json`` (env, the dataset file and its fingerprint, the repair's config).
+``generator.json`` (env, the dataset file and its fingerprint, the repair's name and config).
+Which repair G uses is chosen by name (``EnvSpec.repairs``: e.g. the paper's ``nearest``, which
+returns dataset worlds only, or an ``open`` one that builds new valid worlds) and recorded with
+every setting, defaults included, so a generator loads as it was trained.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import numpy as np
 from flax import struct
 
 from worldagent.envs import registry
+from worldagent.envs.registry import DEFAULT_REPAIR
 from worldagent.envs.core import check_finite
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
@@ -47,6 +51,7 @@ class Generator:
         model: the ``VAE`` module (static).
         env: the environment's registered name (static).
         cell_shape: shape of one world's cells (static).
+        repair_name: the repair's name in ``EnvSpec.repairs`` (static).
         folded: the repair moved behind the decoder's last layer where it allows it (``repair.fold``,
             e.g. a nearest-world repair, which is linear in the logits): the same worlds, fewer
             products. None: G decodes logits, then repairs them.
@@ -57,6 +62,7 @@ class Generator:
     model: VAE = struct.field(pytree_node=False)
     env: str = struct.field(pytree_node=False)
     cell_shape: tuple = struct.field(pytree_node=False)
+    repair_name: str = struct.field(pytree_node=False, default=DEFAULT_REPAIR)
     folded: Any = None
 
     @property
@@ -99,19 +105,25 @@ def _repair_config(meta: Mapping[str, Any]) -> dict:
     return {"apples": meta["apples"]} if meta.get("apples") else {}
 
 
-def make_repair(dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None) -> Any:
-    """The environment's repair for ``dataset`` (``EnvSpec.repair``), given only the settings named
-    (None or ``{}``: its defaults); its ``config`` holds them all. ``generator train`` calls it
-    before the VAE trains, so bad settings cost no training.
+def _repair_name(meta: Mapping[str, Any]) -> str | None:
+    """The repair's name recorded in ``generator.json`` (None in files from before names: the default)."""
+    return meta.get("repair_name")
+
+
+def make_repair(dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None, name: str | None = None) -> Any:
+    """The environment's repair called ``name`` (None: its default) for ``dataset``, given only the
+    settings named (None or ``{}``: its defaults); its ``config`` holds them all. ``generator train``
+    calls it before the VAE trains, so a bad name or bad settings cost no training.
 
     A repair refuses unknown names and bad values with a ``WorldagentError``; one that raises
     ``TypeError``, ``ValueError`` or ``KeyError`` instead, when made or when traced on one
     abstract batch of logits (a value of the wrong type fails there), is reported in one line too.
     """
     spec = registry.get(dataset.env)
+    factory = spec.repair_factory(name)
     settings = dict(repair_config or {})
     try:
-        repair = spec.repair(dataset, settings)
+        repair = factory(dataset, settings)
         jax.eval_shape(repair, jax.ShapeDtypeStruct((1, spec.cell_count), jnp.float32))  # shapes only: nothing is computed
         return repair
     except WorldagentError:
@@ -121,7 +133,9 @@ def make_repair(dataset: WorldDataset, repair_config: Mapping[str, Any] | None =
         raise WorldagentError(f"{spec.name}'s repair refuses its settings ({given}): {error}; fix or drop --repair.") from None
 
 
-def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None, repair: Any = None) -> Generator:
+def build_generator(
+    vae: TrainedVAE, dataset: WorldDataset, repair_config: Mapping[str, Any] | None = None, repair: Any = None, repair_name: str | None = None
+) -> Generator:
     """G(z) from a trained VAE and the dataset it was trained on.
 
     Args:
@@ -130,15 +144,17 @@ def build_generator(vae: TrainedVAE, dataset: WorldDataset, repair_config: Mappi
         repair_config: settings of the environment's repair (e.g. ``{"apples": K}`` for harvest);
             None or ``{}``: the repair's defaults.
         repair: a repair already made for ``dataset`` (``make_repair``), instead of ``repair_config``.
+        repair_name: the name of the repair in ``EnvSpec.repairs`` (None: the env's default).
     """
     if vae.env != dataset.env or vae.fingerprint != dataset.fingerprint:
         raise WorldagentError(
             f"the VAE was trained on {vae.env} dataset {vae.fingerprint}, not on this {dataset.env} dataset {dataset.fingerprint}; "
             "pass the dataset it was trained on."
         )
-    repair = repair if repair is not None else make_repair(dataset, repair_config)
+    repair = repair if repair is not None else make_repair(dataset, repair_config, repair_name)
     folded = repair.fold(*logits_layer(vae.params)) if hasattr(repair, "fold") else None
-    return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape), folded)
+    name = repair_name or registry.get(dataset.env).default_repair
+    return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape), name, folded)
 
 
 def save_generator(directory: Path | str, vae: TrainedVAE, dataset_path: Path | str, generator: Generator) -> Path:
@@ -149,6 +165,7 @@ def save_generator(directory: Path | str, vae: TrainedVAE, dataset_path: Path | 
         "env": generator.env,
         "dataset": str(Path(dataset_path).resolve()),
         "fingerprint": vae.fingerprint,
+        "repair_name": generator.repair_name,
         "repair": dict(generator.repair.config),
     }
     write_text(directory / GENERATOR_FILE, json.dumps(meta, indent=1))
@@ -164,4 +181,4 @@ def load_generator(directory: Path | str, dataset_path: Path | str | None = None
         raise WorldagentError(f"{directory} holds no generator; train one with `worldagent generator train ENV --out {directory}`.") from None
     vae = TrainedVAE.load(directory)
     dataset = WorldDataset.load(dataset_path or meta["dataset"], env=meta["env"])
-    return build_generator(vae, dataset, _repair_config(meta)), vae, dataset
+    return build_generator(vae, dataset, _repair_config(meta), repair_name=_repair_name(meta)), vae, dataset

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
+from worldagent.envs.racing.open_repair import OpenTracks
 from worldagent.envs.repairs import NearestWorld
 
 CORNER_SPAN = 8  # centreline segments over which a corner's turning is summed (256 per lap)
@@ -238,6 +239,7 @@ SPEC = register(
         cells=cells,
         cell_shape=(64, 64),
         repair=NearestWorld.from_dataset,
+        repairs={"nearest": NearestWorld.from_dataset, "open": OpenTracks.from_dataset},
         metrics=Metrics(
             main="return",
             names=("return", "normalised_return", "crashed", "lap_completed", "progress", "steps"),

@@ -244,7 +244,9 @@ class EnvSpec:
     @property
     def default_repair(self) -> str:
         """The name of ``repair`` (``default`` when it has none in ``repairs``)."""
-        return next((name for name, make in self.repairs.items() if make == self.repair), DEFAULT_REPAIR)  # == : bound classmethods are new objects each time
+        return next(
+            (name for name, make in self.repairs.items() if make == self.repair), DEFAULT_REPAIR
+        )  # == : bound classmethods are new objects each time
 
     def repair_factory(self, name: str | None = None) -> Callable[[Any, Mapping[str, Any]], Any]:
         """The repair called ``name`` (None: the default); unknown names list the known ones."""

@@ -30,8 +30,8 @@ import numpy as np
 from flax import struct
 
 from worldagent.envs import registry
-from worldagent.envs.registry import DEFAULT_REPAIR
 from worldagent.envs.core import check_finite
+from worldagent.envs.registry import DEFAULT_REPAIR
 from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.worlds.dataset import WorldDataset

@@ -31,7 +31,7 @@ from flax import struct
 from jax.scipy.ndimage import map_coordinates
 
 from worldagent.envs.racing import walker
-from worldagent.envs.racing.world import HALF_WIDTH, MAX_EXTENT, RASTER_SIZE, Track
+from worldagent.envs.racing.world import MAX_EXTENT, RASTER_SIZE, Track
 from worldagent.errors import WorldagentError
 
 ANGLES = 120  # rays of the footprint profile (3 degrees apart; a checkpoint's sector spans 10)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
 from worldagent.envs.racing.open_repair import OpenTracks
+from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
 from worldagent.envs.repairs import NearestWorld
 
 CORNER_SPAN = 8  # centreline segments over which a corner's turning is summed (256 per lap)

@@ -96,3 +96,13 @@ def test_restarting_a_phase_restarts_what_is_computed_from_it():
     assert restart_closure(["compare", "strategic"]) == ["strategic", "compare"]
     with pytest.raises(WorldagentError, match="unknown phase 'train'"):
         restart_closure(["train"])
+
+
+def test_a_named_repair_is_part_of_the_generator_phases_config_and_checked_per_env():
+    assert "repair" not in TINY.phase_config("racing", "generator")  # runs made before --repair still match
+    opened = TINY.with_repair("open")
+    assert opened.phase_config("racing", "generator")["repair"] == "open"
+    assert [p for p in PHASES if opened.phase_config("racing", p) != TINY.phase_config("racing", p)] == ["generator"]
+    opened.check_repair("racing")
+    with pytest.raises(WorldagentError, match="has no repair 'closest'"):
+        TINY.with_repair("closest").check_repair("racing")

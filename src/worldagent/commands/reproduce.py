@@ -77,6 +77,12 @@ def register(app: typer.Typer) -> None:
         ),
         maximize: bool = typer.Option(None, "--maximize/--minimize", help="With --target METRIC: train toward worlds where it is high / low."),
         curriculum_settings: list[str] = curriculum_set_flag(),
+        repair: str = typer.Option(
+            None,
+            "--repair",
+            help="Every env's G(z) repair by name, e.g. open (new valid worlds beyond the dataset); default: the paper's (nearest). "
+            "`worldagent envs` lists them.",
+        ),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
     ) -> None:
@@ -87,12 +93,13 @@ def register(app: typer.Typer) -> None:
         from worldagent.reproduce.pipeline import reproduce as run
         from worldagent.reproduce.presets import get_preset
 
-        chosen = get_preset(preset).with_algo(algo)
+        chosen = get_preset(preset).with_algo(algo).with_repair(repair)
         envs = resolve_envs(env, chosen)
         chosen = chosen.with_settings(parse_settings(settings, [chosen.algo_of(name) for name in envs]))
         chosen = chosen.with_curriculum(curriculum, target, maximize, parse_curriculum_settings(curriculum_settings))
         for name in envs:
             chosen.check_curriculum(name)
+            chosen.check_repair(name)
         if show:
             typer.echo(chosen.show())
             return

@@ -144,32 +144,38 @@ def generator_phase(ctx: EnvContext) -> dict:
     from worldagent.worlds.dataset import WorldDataset
     from worldagent.worlds.generator import build_generator, save_generator
     from worldagent.worlds.pictures import traversal_sheet
-    from worldagent.worlds.quality import figures, reconstruction
+    from worldagent.worlds.quality import diagnose, figures, reconstruction
     from worldagent.worlds.vae import split_holdout, train_vae
 
     layout = ctx.layout
     data = WorldDataset.load(layout.dataset_path, env=ctx.env)
     config = vae_config(ctx.preset, ctx.env)
     vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=layout.generator_dir)
-    generator = build_generator(vae, data)
+    generator = build_generator(vae, data, repair_name=ctx.preset.repair)
     save_generator(layout.generator_dir, vae, layout.dataset_path, generator)
     train, held = split_holdout(len(data), config.holdout, config.seed)
+    recon = reconstruction(generator, data, held, train)
+    measured = figures(generator, data, QUALITY_SAMPLES, jax.random.key(ctx.seed))
+    warnings = diagnose(recon, measured, len(data))  # collapsed, inert or narrow: the report shows them
     quality = {
         "env": ctx.env,
         "worlds": len(data),
-        "reconstruction": reconstruction(generator, data, held, train),
-        ctx.env: figures(generator, data, QUALITY_SAMPLES, jax.random.key(ctx.seed)),
+        "reconstruction": recon,
+        ctx.env: measured,
         "training": {"epochs": len(vae.history), "final": vae.history[-1], "history": vae.history},
+        "warnings": warnings,
     }
     quality_path = write_text(layout.quality_path, json.dumps(quality, indent=1))
     traversals = traversal_sheet(generator, layout.figure("generator_traversals"))
-    accuracy = quality["reconstruction"]["vae"]["accuracy"]
+    accuracy = recon["vae"]["accuracy"]
+    flagged = f"; {len(warnings)} warning(s): {warnings[0].split(':')[0]}" if warnings else ""
     return {
         "generator": layout.rel(layout.generator_dir),
         "quality": layout.rel(quality_path),
         "traversals": layout.rel(traversals),
         "final_loss": vae.history[-1]["holdout_loss"],
-        "summary": f"{len(vae.history)} epochs, held-out loss {vae.history[-1]['holdout_loss']:.1f}, cell accuracy {accuracy:.3f}",
+        "warnings": warnings,
+        "summary": f"{len(vae.history)} epochs, held-out loss {vae.history[-1]['holdout_loss']:.1f}, cell accuracy {accuracy:.3f}{flagged}",
     }
 
 

@@ -147,6 +147,8 @@ class Preset:
             the budgets' ``train_envs`` / ``learning_starts``.
         curriculum: the curriculum of every env's agent (``reproduce --curriculum``); checked per
             env by ``check_curriculum`` before any phase runs.
+        repair: the repair of every env's G(z) by name (``reproduce --repair``, ``EnvSpec.repairs``,
+            e.g. ``open``); None: each env's default (the paper's ``nearest`` for racing and harvest).
     """
 
     name: str
@@ -159,6 +161,7 @@ class Preset:
     algo: str | None = None
     settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     curriculum: Curriculum = field(default_factory=Curriculum)
+    repair: str | None = None
 
     def __post_init__(self):
         if self.repeats < 1 or self.seed < 0:
@@ -216,6 +219,15 @@ class Preset:
         settings = {algo: dict(fields) for algo, fields in settings.items() if fields}
         return replace(self, settings=settings) if settings else self
 
+    def with_repair(self, name: str | None) -> Preset:
+        """This preset with every env's G(z) repaired by the repair called ``name`` (``--repair``; None: the defaults);
+        ``check_repair`` refuses it for an env that has no such repair."""
+        return self if name is None else replace(self, repair=name)
+
+    def check_repair(self, env: str) -> None:
+        """Refuse, in one line and before any work, a repair ``env`` does not have."""
+        registry.get(env).repair_factory(self.repair)
+
     def with_curriculum(self, name: str = "dr", target: str | None = None, maximize: bool | None = None, settings: Mapping | None = None) -> Preset:
         """This preset with every env's agent trained with curriculum ``name`` (``--curriculum``, ``--target``,
         ``--maximize/--minimize``, ``--curriculum-set`` parsed by ``curricula.parse_curriculum_settings``)."""
@@ -255,7 +267,12 @@ class Preset:
         options = self.options_of(env)
         table = {
             "dataset": {"worlds": b.worlds},
-            "generator": {"epochs": b.vae_epochs, "hidden": list(self.vae_hidden), "batch_size": self.vae_batch_size},
+            "generator": {
+                "epochs": b.vae_epochs,
+                "hidden": list(self.vae_hidden),
+                "batch_size": self.vae_batch_size,
+                **({"repair": self.repair} if self.repair else {}),  # absent for the default: earlier runs still match
+            },
             "agent": {
                 "algo": self.algo_of(env),
                 "episodes": b.episodes,

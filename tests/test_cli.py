@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from PIL import Image
 from typer.testing import CliRunner
@@ -85,11 +87,16 @@ def test_dataset_and_generator_commands_end_to_end(tmp_path):
     args = ["generator", "train", "harvest", "--dataset", str(data), "--out", str(gen), "--epochs", "2", "--batch-size", "8", "--quiet"]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
+    assert "active units" in result.output and "distinct decodes" in result.output  # what search will get, said after training
+    assert "collapsed:" in result.output  # 2 epochs on 36 maps: z is not in use yet, and it says so
     assert runner.invoke(app, ["generator", "show", str(gen), "--count", "2"]).exit_code == 0
     assert (gen / "traversals.png").exists() and (gen / "reconstructions.png").exists()
     report = runner.invoke(app, ["generator", "report", str(gen), "--samples", "50"])
     assert report.exit_code == 0, report.output
     assert '"harvest"' in report.output and (gen / "quality.json").exists()
+    quality = json.loads((gen / "quality.json").read_text())
+    assert quality["warnings"] and all(f"warning: {line}" in report.output for line in quality["warnings"])
+    assert {"latent", "sensitivity", "distinct_share"} <= set(quality["harvest"])
     again = runner.invoke(app, args)  # finished run: resumes at its last epoch, trains nothing more
     assert again.exit_code == 0, again.output
 
@@ -100,6 +107,7 @@ def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):
         (["generator", "report", str(tmp_path / "none")], "holds no generator"),
         (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--dataset", str(tmp_path / "missing.npz")], "does not exist"),
         (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--repair", "apples"], "write NAME=VALUE"),
+        (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--free-bits", "-1"], "free_bits=-1.0"),
     ]
     for args, message in cases:
         result = runner.invoke(app, args)

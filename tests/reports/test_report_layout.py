@@ -51,3 +51,18 @@ def test_phase_settings_read_as_text():
     assert settings_text({"episodes": 300, "seeds": [0, 1], "options": {"tagger": [0]}, "rate": 0.000123456}) == (
         "episodes 300, options.tagger 0, rate 0.0001235, seeds 0 1"
     )
+
+
+def test_the_generators_warnings_and_latent_figures_are_shown(tmp_path):
+    run = small_run(tmp_path)
+    path = run / "racing" / "generator" / "quality.json"
+    quality = json.loads(path.read_text())
+    warning = "collapsed: 0 of 10 latent dimensions active, KL 0.0087 nats in all; G(z) barely depends on z — retrain with a larger --free-bits"
+    quality["warnings"] = [warning]
+    quality["racing"]["latent"] = {"kl_total": 0.0087, "active_units": 0, "kl_per_dim": [0.00087] * 10}
+    quality["racing"]["sensitivity"] = {"mean_changed_world_share": 0.0}
+    path.write_text(json.dumps(quality))
+    generator = build_report(run).read_text().split('<section id="generator">')[1].split("</section>")[0]
+    assert "<ul class='warning'><li>collapsed: 0 of 10" in generator and "--free-bits" in generator
+    assert "<td>latent: KL, nats (active units)</td><td>0.0087 (0 of 10)</td>" in generator
+    assert "<td>worlds changed by a ±1 move along z</td><td>0</td>" in generator

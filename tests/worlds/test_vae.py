@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
+import jax
 import numpy as np
 import pytest
 
@@ -61,8 +62,37 @@ def test_resuming_on_other_data_is_refused(tmp_path, racing_data, small_vae):
 
 
 def test_bad_settings_are_refused(racing_data, small_vae):
-    for bad in (replace(small_vae, holdout=1.0), replace(small_vae, epochs=0), replace(small_vae, latent_dim=0)):
+    for bad in (replace(small_vae, holdout=1.0), replace(small_vae, epochs=0), replace(small_vae, latent_dim=0), replace(small_vae, free_bits=-1.0)):
         with pytest.raises(WorldagentError):
             train_vae(racing_data, bad, progress=False)
     with pytest.raises(WorldagentError, match="batch_size"):
         train_vae(racing_data.subset(np.arange(10)), small_vae, progress=False)
+
+
+def test_free_bits_floor_each_dimensions_kl_in_the_loss_only():
+    from worldagent.worlds.vae import negative_elbo
+
+    logits, cells = np.zeros((4, 6), np.float32), np.ones((4, 6), np.float32)
+    mean = np.array([[0.1, 2.0, 0.0]] * 4, np.float32)  # KL per dimension 0.005, 2 and 0 nats
+    log_var = np.zeros((4, 3), np.float32)
+    plain, (nll, kl) = negative_elbo(logits, cells, mean, log_var, 1.0)
+    floored, (nll_floored, kl_floored) = negative_elbo(logits, cells, mean, log_var, 1.0, free_bits=0.5)
+    assert float(kl) == float(kl_floored) == pytest.approx(2.005) and float(nll) == float(nll_floored) == pytest.approx(6 * np.log(2))
+    assert float(plain) == pytest.approx(float(nll) + 2.005) and float(floored) == pytest.approx(float(nll) + 0.5 + 2.0 + 0.5)
+    grad = jax.grad(lambda m: negative_elbo(logits, cells, m, log_var, 1.0, free_bits=0.5)[0])(mean)
+    assert np.all(np.asarray(grad)[:, [0, 2]] == 0) and np.all(np.asarray(grad)[:, 1] > 0)  # under the floor, z is free
+
+
+def test_old_checkpoints_load_with_the_training_they_had(tmp_path, racing_vae, racing_data, small_vae):
+    """A vae.json written before free bits existed trained the plain ELBO: it loads with free_bits 0, and
+    resuming it under the new default is refused with the setting named."""
+    data = racing_data.subset(np.arange(64))
+    old = replace(small_vae, epochs=1, free_bits=0.0)
+    train_vae(data, old, progress=False, checkpoint_dir=tmp_path)
+    meta = json.loads((tmp_path / "vae.json").read_text())
+    del meta["config"]["free_bits"]
+    (tmp_path / "vae.json").write_text(json.dumps(meta))
+    assert TrainedVAE.load(tmp_path).config == old
+    assert len(train_vae(data, replace(old, epochs=2), progress=False, checkpoint_dir=tmp_path).history) == 2
+    with pytest.raises(WorldagentError, match=r"free_bits 0\.0, not 0\.5"):
+        train_vae(data, replace(old, epochs=3, free_bits=0.5), progress=False, checkpoint_dir=tmp_path)

@@ -92,8 +92,10 @@ def key_figures(quality: dict) -> str:
 
 
 def print_warnings(warnings: list[str]) -> None:
+    from rich.markup import escape
+
     for line in warnings:
-        console.print(f"[yellow]warning[/yellow]: {line}", highlight=False)
+        console.print(f"[yellow]warning[/yellow]: {escape(line)}", highlight=False)
 
 
 def structure_table(structure: dict) -> str:

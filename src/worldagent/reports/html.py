@@ -79,13 +79,33 @@ def generator_section(run_dir: Path, results: dict) -> str:
         ]
         figures = quality.get(env, {})
         rows += [[name.replace("_", " "), fmt(value)] for name, value in figures.items() if not isinstance(value, dict)]
+        rows += latent_rows(figures)
         return (
-            table(["measure", "value"], rows)
+            warnings_list(quality.get("warnings", []))
+            + table(["measure", "value"], rows)
             + structure_table(figures.get("structure", {}))
             + image(res["layout"].figure("generator_traversals"), f"{env}: latent traversals of G(z) (one row per latent dimension)")
         )
 
     return per_env(results, "generator", render, "quality", "no quality.json")
+
+
+def warnings_list(warnings: list[str]) -> str:
+    """The generator's one-line warnings (collapsed, inert, narrow; ``quality.json``'s "warnings"), first and in colour."""
+    if not warnings:
+        return ""
+    return "<ul class='warning'>" + "".join(f"<li>{esc(line)}</li>" for line in warnings) + "</ul>"
+
+
+def latent_rows(figures: dict) -> list[list[str]]:
+    """Rows of the latent's use and G(z)'s sensitivity (absent from quality.json files written before them)."""
+    rows = []
+    if "latent" in figures:
+        latent = figures["latent"]
+        rows.append(["latent: KL, nats (active units)", f"{fmt(latent['kl_total'])} ({latent['active_units']} of {len(latent['kl_per_dim'])})"])
+    if "sensitivity" in figures:
+        rows.append(["worlds changed by a ±1 move along z", fmt(figures["sensitivity"]["mean_changed_world_share"])])
+    return rows
 
 
 def structure_table(structure: dict) -> str:
@@ -98,10 +118,12 @@ def structure_table(structure: dict) -> str:
             fmt(v.get("generator")),
             fmt(v.get("dataset")),
             fmt(None if v.get("relative_difference") is None else 100 * v["relative_difference"], 3),
+            fmt(v.get("spread_ratio"), 3),
         ]
         for name, v in structure.items()
     ]
-    return "<h4>Structure: worlds G(z) against the dataset's (means)</h4>" + table(["feature", "G(z)", "dataset", "difference, %"], rows)
+    head = ["feature", "G(z)", "dataset", "difference, %", "std G(z) / dataset"]
+    return "<h4>Structure: worlds G(z) against the dataset's (means, spread)</h4>" + table(head, rows)
 
 
 def explorer_hint(run_dir: Path) -> str:

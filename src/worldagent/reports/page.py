@@ -15,7 +15,7 @@ h1{margin-bottom:.2em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin
 table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.92em}th,td{border:1px solid #ccc;padding:.25em .6em;text-align:left;vertical-align:top}
 th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}
 img{max-width:100%;border:1px solid #eee;margin:.4em 0}figure{margin:.6em 0 1.4em}figcaption{font-size:.88em;color:#555}
-.missing{color:#a66;font-style:italic}.error{color:#b00;font-family:monospace;white-space:pre-wrap}
+.missing{color:#a66;font-style:italic}.warning{color:#a50}.error{color:#b00;font-family:monospace;white-space:pre-wrap}
 nav a{margin-right:1em}details{margin:.6em 0}summary{cursor:pointer;color:#444}p.explore{background:#eef5ee;padding:.5em .8em;border-left:3px solid #5a5}code,pre{background:#f6f6f6;padding:.1em .3em}pre{padding:.6em;overflow-x:auto;font-size:.85em}
 """
 

@@ -9,7 +9,14 @@
   G(z) after repair and, where the spec has a ``raw_decode``, before it, and the diversity of
   the samples' cells (distinct layouts, mean pairwise Hamming distance);
 - ``structure``: each of the environment's descriptors (e.g. harvest's share of maps whose walls
-  cut the tagger off from another agent) over G(z) samples against the dataset.
+  cut the tagger off from another agent) over G(z) samples against the dataset: mean, spread
+  (standard deviation, 5-95% range) and their ratio;
+- ``latent``: KL per latent dimension and active units (Burda et al. 2016), over the dataset's
+  encodings: does z carry anything about the world?
+- ``sensitivity``: how much G(z) changes when z moves one prior standard deviation along each axis;
+- ``diagnose``: one-line warnings, each naming its fix, when a generator is collapsed (z carries
+  nothing), inert (moving z changes no world) or narrow (a descriptor spreads far less than in the
+  dataset) — such a generator gives search nothing to find, whatever its loss says.
 
 Worlds are compared by their cells (``EnvSpec.cells``), so nothing here depends on the
 environment: racing's nearest-track repair and harvest's apple-count repair get the same figures.
@@ -20,16 +27,21 @@ from __future__ import annotations
 from collections import Counter
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.worlds.dataset import WorldDataset
 from worldagent.worlds.generator import Generator
+from worldagent.worlds.vae import VAE
 
 BATCH = 1000  # worlds per jitted call
 HAMMING_PAIRS = 10_000  # sample pairs for the mean Hamming distance
 STRUCTURE_WORLDS = 2000  # worlds of each side whose descriptors are compared (computed on the host, one by one)
+USAGE_WORLDS = 10_000  # dataset worlds whose encodings measure the latent's use
+SENSITIVITY_LATENTS = 100  # prior draws moved ±1 along each axis (2·L·100 decodes)
+ACTIVE_UNIT_VARIANCE = 0.01  # Burda et al. 2016: a dimension is active when Cov_x(E_q[z_d|x]) exceeds it
 
 
 def _batched(fn, array, *args):
@@ -50,6 +62,86 @@ def _reconstruct_worlds(generator: Generator, cells):
 @jax.jit
 def _sample(generator: Generator, z):
     return generator(z), generator.logits(z)
+
+
+@jax.jit
+def _posterior(generator: Generator, cells):
+    mean, log_var = generator.model.apply({"params": generator.params}, jnp.asarray(cells, jnp.float32), method=VAE.encode)
+    return jnp.concatenate([mean, log_var], axis=1)
+
+
+def latent_usage(generator: Generator, cells: np.ndarray) -> dict:
+    """How much of z the encoder uses: KL per dimension and active units.
+
+    Args:
+        generator: G (its encoder is used).
+        cells: uint8[N, D] the worlds to encode (N >= 2).
+
+    Returns:
+        ``kl_per_dim`` (L floats, nats: the mean over the worlds of KL(q(z_d|x) || N(0, 1))),
+        ``kl_total`` (their sum), ``activity_per_dim`` (L floats: the variance over the worlds of
+        the posterior mean E_q[z_d|x]), ``active_units`` (dimensions whose activity exceeds
+        ``ACTIVE_UNIT_VARIANCE``, Burda et al. 2016) and ``worlds`` (N).
+    """
+    posterior = _batched(_posterior, np.asarray(cells, np.float32), generator)
+    mean, log_var = np.split(posterior.astype(np.float64), 2, axis=1)
+    kl = 0.5 * (np.exp(log_var) + mean**2 - 1.0 - log_var).mean(axis=0)
+    activity = mean.var(axis=0)
+    return {
+        "kl_per_dim": kl.tolist(),
+        "kl_total": float(kl.sum()),
+        "activity_per_dim": activity.tolist(),
+        "active_units": int((activity > ACTIVE_UNIT_VARIANCE).sum()),
+        "worlds": int(len(cells)),
+    }
+
+
+def _decode_cells(generator: Generator, spec, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cells uint8[S, D] of G(z), decoded probabilities f32[S, D]) for latents f32[S, L]."""
+    cells, probabilities = [], []
+    for start in range(0, len(z), BATCH):
+        worlds, logits = _sample(generator, z[start : start + BATCH])
+        cells.append(np.asarray(spec.cells(jax.tree_util.tree_map(np.asarray, worlds)), np.uint8))
+        probabilities.append(np.asarray(jax.nn.sigmoid(logits)))
+    return np.concatenate(cells), np.concatenate(probabilities)
+
+
+def sensitivity(generator: Generator, z: np.ndarray) -> dict:
+    """How much G(z) changes when each latent coordinate moves by ±1 (one prior standard deviation).
+
+    Args:
+        generator: G.
+        z: f32[S, L] latents (prior draws) to move from.
+
+    Returns:
+        Per dimension (L floats each): ``changed_world_share`` (the share of the 2·S moves whose
+        repaired world differs), ``changed_cell_share`` (mean share of its cells that differ) and
+        ``probability_change`` (mean |Δp| over the decoded cell probabilities, before repair);
+        ``mean_changed_world_share``, ``mean_changed_cell_share`` and ``mean_probability_change``
+        (their means over dimensions) and ``latents`` (S).
+    """
+    spec = registry.get(generator.env)
+    z = np.asarray(z, np.float32)
+    samples, dims = z.shape
+    steps = np.concatenate([np.eye(dims, dtype=np.float32), -np.eye(dims, dtype=np.float32)])  # f32[2L, L]
+    moved = (z[None, :, :] + steps[:, None, :]).reshape(-1, dims)  # f32[2L·S, L], grouped by move
+    cells, probability = _decode_cells(generator, spec, np.concatenate([z, moved]))
+    base_cells, base_p = cells[:samples], probability[:samples]
+    moved_cells = cells[samples:].reshape(2, dims, samples, -1)
+    moved_p = probability[samples:].reshape(2, dims, samples, -1)
+    differs = moved_cells != base_cells
+    world = differs.any(axis=-1).mean(axis=(0, 2))
+    cell = differs.mean(axis=(0, 2, 3))
+    delta = np.abs(moved_p - base_p).mean(axis=(0, 2, 3))
+    return {
+        "changed_world_share": world.tolist(),
+        "changed_cell_share": cell.tolist(),
+        "probability_change": delta.tolist(),
+        "mean_changed_world_share": float(world.mean()),
+        "mean_changed_cell_share": float(cell.mean()),
+        "mean_probability_change": float(delta.mean()),
+        "latents": int(samples),
+    }
 
 
 def _cell_scores(logits: np.ndarray, cells: np.ndarray) -> dict:
@@ -121,10 +213,13 @@ def _diversity(cells: np.ndarray, dataset_cells: np.ndarray) -> dict:
     samples = len(cells)
     seen = Counter(row.tobytes() for row in cells)  # hashing rows: np.unique(axis=0) sorts them, far slower
     counts = np.fromiter(seen.values(), np.int64, len(seen))
-    reached = seen.keys() & {row.tobytes() for row in dataset_cells}
+    known = {row.tobytes() for row in dataset_cells}
+    reached = seen.keys() & known
     pairs = np.random.default_rng(0).integers(0, samples, size=(min(HAMMING_PAIRS, samples * 4), 2))
     return {
         "coverage_distinct_worlds": int(len(counts)),
+        "distinct_share": float(len(counts) / samples),
+        "novel_share": float(sum(count for row, count in seen.items() if row not in known) / samples),
         "coverage_fraction": float(len(reached) / len(dataset_cells)),
         "most_reached_share": float(counts.max() / samples),
         "distinct_layouts": int(len(counts)),
@@ -132,23 +227,41 @@ def _diversity(cells: np.ndarray, dataset_cells: np.ndarray) -> dict:
     }
 
 
+def spread(values: np.ndarray) -> dict:
+    """``std`` and the 5-95% range ``p5``, ``p95`` of f[N] values."""
+    low, high = np.percentile(values, [5, 95])
+    return {"std": float(np.std(values)), "p5": float(low), "p95": float(high)}
+
+
 def structure(spec, generated, count: int, dataset: WorldDataset) -> dict:
-    """Each of the spec's descriptors (``Metrics.descriptors``) averaged over G(z) samples and over the dataset.
+    """Each of the spec's descriptors (``Metrics.descriptors``) over G(z) samples against the dataset: mean and spread.
 
     A generator can match cells on average and still break what matters about a world (a wall
-    with a gap encloses nothing); the descriptors measure such structure. Up to
-    ``STRUCTURE_WORLDS`` worlds of each side.
+    with a gap encloses nothing), or match the mean and lose the spread (every maze with the
+    mean wall count); the descriptors measure such structure. Up to ``STRUCTURE_WORLDS`` worlds
+    of each side.
 
     Returns:
-        ``{name: {"generator": mean, "dataset": mean, "relative_difference": (g - d) / d or None}}``.
+        ``{name: {"generator": mean, "dataset": mean, "relative_difference": (g - d) / d or None,
+        "generator_spread": spread, "dataset_spread": spread, "spread_ratio": g std / d std or None}}``
+        (``spread``: std, p5, p95; the ratio is None when the dataset's std is 0).
     """
     count = min(count, STRUCTURE_WORLDS)
     reference = min(len(dataset), STRUCTURE_WORLDS)
     out = {}
     for name, describe in spec.metrics.descriptors.items():
-        ours = float(np.mean([describe(world) for world in _each(generated, count)]))
-        theirs = float(np.mean([describe(world) for world in _each(dataset.worlds, reference)]))
-        out[name] = {"generator": ours, "dataset": theirs, "relative_difference": (ours - theirs) / theirs if theirs else None}
+        ours = np.array([describe(world) for world in _each(generated, count)], np.float64)
+        theirs = np.array([describe(world) for world in _each(dataset.worlds, reference)], np.float64)
+        mean, reference_mean = float(ours.mean()), float(theirs.mean())
+        ours_spread, theirs_spread = spread(ours), spread(theirs)
+        out[name] = {
+            "generator": mean,
+            "dataset": reference_mean,
+            "relative_difference": (mean - reference_mean) / reference_mean if reference_mean else None,
+            "generator_spread": ours_spread,
+            "dataset_spread": theirs_spread,
+            "spread_ratio": ours_spread["std"] / theirs_spread["std"] if theirs_spread["std"] > 0 else None,
+        }
     return out
 
 
@@ -166,7 +279,10 @@ def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.
         ``coverage_fraction`` (the share of dataset worlds some sample equals), ``most_reached_share`` (the commonest sample's
         share), ``validity_after_repair``, ``validity_before_repair`` (only when the spec has a
         ``raw_decode``), ``distinct_layouts``, ``mean_cell_hamming`` (between random sample
-        pairs), ``structure`` (``structure``: the spec's descriptors, G(z) against the dataset)
+        pairs), ``distinct_share`` (distinct worlds / S), ``novel_share`` (the share of samples
+        equal to no dataset world), ``structure`` (``structure``: the spec's descriptors, G(z)
+        against the dataset), ``latent`` (``latent_usage`` over up to ``USAGE_WORLDS`` dataset
+        worlds), ``sensitivity`` (``sensitivity`` from the first ``SENSITIVITY_LATENTS`` draws)
         and ``samples``.
     """
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1:
@@ -185,7 +301,78 @@ def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.
     cells = np.asarray(spec.cells(worlds), np.uint8)
     result = {"self_mapping_rate": _self_mapping_rate(generator, dataset, spec), **_diversity(cells, dataset.cells)}
     result["structure"] = structure(spec, worlds, samples, dataset)
+    result["latent"] = latent_usage(generator, dataset.cells[:USAGE_WORLDS])
+    result["sensitivity"] = sensitivity(generator, z[:SENSITIVITY_LATENTS])
     result["validity_after_repair"] = float(np.concatenate(valid_after).mean())
     if valid_before:
         result["validity_before_repair"] = float(np.concatenate(valid_before).mean())
     return {**result, "samples": int(samples)}
+
+
+# -- warnings ---------------------------------------------------------------------------------
+# Each threshold flags a generator that search cannot use, not one that is merely imperfect.
+MIN_ACTIVE_UNITS = 2  # one active dimension is a dial, not a space: search has one direction to move in
+MIN_KL_NATS = float(np.log(2))  # under one bit of KL in all of z, the code cannot even split the dataset in two
+MIN_NLL_GAIN = 0.01  # held-out NLL within 1% of the mean world's: the decoder ignores z
+MIN_CHANGED_WORLD_SHARE = 0.05  # a one-standard-deviation move changes fewer than 1 world in 20
+MIN_DISTINCT_SHARE = 0.1  # fewer distinct decodes than 1 in 10 of min(samples, dataset worlds)
+MIN_SPREAD_RATIO = 0.5  # a descriptor's std under G(z) below half the dataset's: its tails are out of search's reach
+RETRAIN = "retrain with a larger --free-bits (e.g. 1.0), a smaller --beta or more worlds"
+
+
+def _collapse(reconstruction: dict, latent: dict) -> list[str]:
+    units, kl = latent["active_units"], latent["kl_total"]
+    dims = len(latent["kl_per_dim"])
+    out = []
+    if units < MIN_ACTIVE_UNITS or kl < MIN_KL_NATS:
+        out.append(f"collapsed: {units} of {dims} latent dimensions active, KL {kl:.3g} nats in all; G(z) barely depends on z — {RETRAIN}.")
+    vae, mean = reconstruction["vae"]["nll_per_world"], reconstruction["mean_image"]["nll_per_world"]
+    if vae > (1 - MIN_NLL_GAIN) * mean:
+        out.append(
+            f"collapsed: reconstruction no better than the mean world (held-out NLL {vae:.1f} vs {mean:.1f} nats per world): "
+            f"z tells the decoder nothing it can use — {RETRAIN}, or train longer."
+        )
+    return out
+
+
+def _inert(figures: dict, worlds: int) -> list[str]:
+    moves = figures["sensitivity"]["mean_changed_world_share"]
+    distinct, samples = figures["coverage_distinct_worlds"], figures["samples"]
+    if moves < MIN_CHANGED_WORLD_SHARE or distinct < MIN_DISTINCT_SHARE * min(samples, worlds):
+        return [
+            f"inert: a one-standard-deviation move along z changes {moves:.0%} of worlds and {samples:,} draws give {distinct:,} distinct worlds; "
+            "the repair discards what the decoder varies — try another --repair, or retrain with a larger --free-bits."
+        ]
+    return []
+
+
+def _narrow(structure: dict) -> list[str]:
+    out = []
+    for name, row in structure.items():
+        ratio, ours, theirs = row.get("spread_ratio"), row.get("generator_spread"), row.get("dataset_spread")
+        if ratio is None or ratio >= MIN_SPREAD_RATIO:
+            continue
+        shape = "is constant under G(z)" if ours["std"] == 0 else f"spreads under G(z) {ratio:.0%} as wide as in the dataset"
+        out.append(
+            f"narrow: {name} {shape} (std {ours['std']:.3g} vs {theirs['std']:.3g}, 5-95% "
+            f"{ours['p5']:.3g}-{ours['p95']:.3g} vs {theirs['p5']:.3g}-{theirs['p95']:.3g}): search cannot reach its tails — "
+            f"use a repair that keeps the decoded {name}, or retrain with a larger --free-bits."
+        )
+    return out
+
+
+def diagnose(reconstruction: dict, figures: dict, worlds: int) -> list[str]:
+    """One-line warnings, each naming its fix, for a generator search cannot use (empty: none).
+
+    Collapsed: fewer than ``MIN_ACTIVE_UNITS`` active dimensions or under ``MIN_KL_NATS`` of KL,
+    or a held-out reconstruction within ``MIN_NLL_GAIN`` of the mean world's. Inert: a ±1 move
+    along z changes under ``MIN_CHANGED_WORLD_SHARE`` of worlds, or the draws hold under
+    ``MIN_DISTINCT_SHARE`` distinct worlds. Narrow: a descriptor whose std under G(z) is below
+    ``MIN_SPREAD_RATIO`` of the dataset's.
+
+    Args:
+        reconstruction: ``reconstruction``'s figures.
+        figures: ``figures``' figures (with ``latent``, ``sensitivity`` and ``structure``).
+        worlds: the dataset's size (caps how many distinct worlds a nearest-world repair can give).
+    """
+    return _collapse(reconstruction, figures["latent"]) + _inert(figures, worlds) + _narrow(figures["structure"])

@@ -322,6 +322,7 @@ def main(argv=None) -> dict:
         if "dr" not in args.arms or args.arms.index(arm) < args.arms.index("dr"):
             raise SystemExit(f"--arms: the {arm} arm selects its worlds with dr's first agent; list dr before {arm}.")
     suffix = "" if episodes == defaults["episodes"] else f"-{episodes}"
+    suffix += "" if generator.repair_name == spec.default_repair else f"-{generator.repair_name}"  # e.g. curriculum-racing-open.json
     out = RESULTS / f"curriculum-{spec.name}{suffix}.json"
     for done, arm in enumerate(args.arms, start=1):
         if arm in INFLUENCE_ARMS:
@@ -361,6 +362,7 @@ def main(argv=None) -> dict:
             "episodes": episodes,
             "seeds": args.seeds,
             "generator": str(generator_dir),
+            "repair": generator.repair_name,
             "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
             "atlas": {"budget": args.atlas_budget, "method": "CMA-ME over the env's default descriptors", "seed": 0},
             "influence": {"selection": spec.selection, "worlds_per_round": args.offline_search, "rounds": args.rounds},

@@ -106,7 +106,11 @@ def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):
         (["dataset", "chess", "--out", str(tmp_path / "x.npz")], "unknown environment"),
         (["generator", "report", str(tmp_path / "none")], "holds no generator"),
         (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--dataset", str(tmp_path / "missing.npz")], "does not exist"),
-        (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--repair", "apples"], "write NAME=VALUE"),
+        (
+            ["generator", "train", "racing", "--out", str(tmp_path / "g"), "--repair", "apples"],
+            "racing has no repair 'apples'; use one of: nearest, open",
+        ),
+        (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--repair", "open", "--repair", "=3"], "write settings as NAME=VALUE"),
         (["generator", "train", "racing", "--out", str(tmp_path / "g"), "--free-bits", "-1"], "free_bits=-1.0"),
     ]
     for args, message in cases:

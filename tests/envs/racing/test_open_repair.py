@@ -46,12 +46,15 @@ def test_a_rejected_draw_is_projected_to_an_accepted_one():
     loops, retries = tracks.upstream_loops(np.arange(40), return_retries=True)
     seed = int(np.flatnonzero(retries)[0])  # upstream redraws this seed's first checkpoints
     noise, rad = walker.draws([np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))])
-    unit = open_repair.to_unit(jnp.asarray(noise[0], jnp.float32), jnp.asarray(rad[0], jnp.float32))
-    assert not bool(walker.build(*open_repair.from_unit(unit))[1])
-    line, used = open_repair.project(unit)
-    assert bool(walker.build(*open_repair.from_unit(used))[1])
-    assert 0 < np.abs(np.asarray(used) - np.asarray(unit)).max() < 0.5  # moved, towards the centre, not to it
-    tracks.Track.validate(walker.track_from_centreline(line))
+    rejected = open_repair.to_unit(jnp.asarray(noise, jnp.float32), jnp.asarray(rad, jnp.float32))
+    accepted = jnp.full_like(rejected, 0.3)  # a set the walker accepts, batched with it
+    unit = jnp.concatenate([rejected, accepted])
+    assert walker.build(*open_repair.from_unit(unit))[1].tolist() == [False, True]
+    lines, used = open_repair.project(unit)
+    assert walker.build(*open_repair.from_unit(used))[1].all()
+    assert 0 < np.abs(np.asarray(used[0] - unit[0])).max() < 0.5  # moved, towards the centre, not to it
+    np.testing.assert_array_equal(used[1], unit[1])  # an accepted set is kept
+    jax.vmap(walker.track_from_centreline)(lines).validate()
 
 
 def test_the_shipped_map_is_a_least_squares_fit_of_the_same_features(repaired):

@@ -18,7 +18,7 @@ def walked():
     """(noise, rad) of each seed's first draws, the JAX walker's (centrelines, accepted), and upstream's (loops, retries)."""
     rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(int(s)))) for s in SEEDS]
     noise, rad = walker.draws(rngs)
-    lines, accepted = jax.jit(jax.vmap(walker.build))(jnp.asarray(noise, jnp.float32), jnp.asarray(rad, jnp.float32))
+    lines, accepted = jax.jit(walker.build)(jnp.asarray(noise, jnp.float32), jnp.asarray(rad, jnp.float32))
     return np.asarray(lines), np.asarray(accepted), *tracks.upstream_loops(SEEDS, return_retries=True)
 
 

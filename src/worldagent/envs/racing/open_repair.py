@@ -73,21 +73,24 @@ def _features(profiles: jax.Array) -> jax.Array:
 
 
 def project(unit: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(centreline f32[K, 2], the draws used f32[20]) for draws ``unit`` f32[20] in [0, 1]: the walker's
-    track, or, where it rejects them, the track of the first of ``SHRINK``'s steps towards the
-    centre of the ranges that it accepts."""
+    """(centrelines f32[B, K, 2], the draws used f32[B, 20]) for draws ``unit`` f32[B, 20] in [0, 1]:
+    the walker's tracks, and where it rejects a set, the track of the first of ``SHRINK``'s steps
+    towards the centre of the ranges that it accepts (one more walk of the batch per step taken)."""
     steps = jnp.asarray(SHRINK, jnp.float32)
 
-    def attempt(stage):
-        shrunk = 0.5 + (1.0 - steps[stage]) * (unit - 0.5)
-        line, accepted = walker.build(*from_unit(shrunk))
-        return stage, accepted, shrunk, line
+    def attempt(carry):
+        stage, accepted, used, lines = carry
+        shrunk = 0.5 + (1.0 - steps[stage + 1]) * (unit - 0.5)
+        new_lines, ok = walker.build(*from_unit(shrunk))
+        redo = ~accepted
+        return stage + 1, accepted | ok, jnp.where(redo[:, None], shrunk, used), jnp.where(redo[:, None, None], new_lines, lines)
 
     def rejected(carry):
-        return ~carry[1] & (carry[0] < len(SHRINK) - 1)
+        return ~carry[1].all() & (carry[0] < len(SHRINK) - 1)
 
-    _, _, used, line = jax.lax.while_loop(rejected, lambda carry: attempt(carry[0] + 1), attempt(jnp.int32(0)))
-    return line, used
+    lines, accepted = walker.build(*from_unit(unit))
+    _, _, used, lines = jax.lax.while_loop(rejected, attempt, (jnp.int32(0), accepted, unit, lines))
+    return lines, used
 
 
 @struct.dataclass
@@ -119,7 +122,7 @@ class OpenTracks:
 
     def __call__(self, logits: jax.Array) -> Track:
         """Valid tracks for decoded footprint logits f32[B, 4096] (batched, jittable)."""
-        lines, _ = jax.vmap(project)(self.draws(logits))
+        lines, _ = project(self.draws(logits))
         return jax.vmap(walker.track_from_centreline)(lines)
 
 
@@ -136,7 +139,7 @@ def fit_inverse(seeds, chunk: int = 1000) -> tuple[np.ndarray, dict]:
     (upstream redraws those) are left out. Returns (inverse f32[ANGLES + 1, 20], {"tracks": used}).
     """
     features, targets = [], []
-    build = jax.jit(jax.vmap(walker.build))
+    build = jax.jit(walker.build)
     describe = jax.jit(jax.vmap(lambda line: profile(walker.track_from_centreline(line).raster.astype(jnp.float32))))
     for start in range(0, len(seeds), chunk):
         rngs = [np.random.Generator(np.random.PCG64(np.random.SeedSequence(int(s)))) for s in seeds[start : start + chunk]]

@@ -3,11 +3,11 @@
 ``tracks.py`` replays upstream's generator float for float in numpy, for the dataset. The open
 repair (``open_repair.py``) needs the same construction for checkpoints it reads off decoded
 latents, batched and inside jitted training programs, so this module is that walker again as a
-pure JAX function of one checkpoint set (``vmap`` it over a batch):
+pure JAX function of a batch of checkpoint sets:
 
 1. ``walk``: upstream's walker (steer towards the next checkpoint, turning at most
    ``TRACK_TURN_RATE`` per ``TRACK_DETAIL_STEP``) for up to 2,500 steps or five laps, keeping the
-   last ``RING`` steps and the last two start-line crossings;
+   last ``RING`` steps and the last two start-line crossings, every track of the batch in lockstep;
 2. ``cut``: upstream's loop between those two crossings and its rejection test (two crossings,
    glued within one step);
 3. ``resample``: the loop evenly by arc length, ``NUM_POINTS`` points, normalised (as
@@ -54,12 +54,12 @@ FREE = CHECKPOINTS - 2  # checkpoints 0 and 11 are fixed by upstream (angle 0 an
 
 
 class Walk(NamedTuple):
-    """The walker's last ``RING`` steps and where its loop lies.
+    """The walker's last ``RING`` steps and where each track's loop lies (B tracks).
 
     Attributes:
-        ring: f32[RING, 3] (mean heading beta, x, y) of step t at row ``t % RING``.
-        length: i32 steps walked.
-        first, last: i32 the last two start-line crossings (-1: fewer crossings).
+        ring: f32[RING, 3, B] (mean heading beta, x, y) of step t at row ``t % RING``.
+        length: i32[B] steps walked.
+        first, last: i32[B] the last two start-line crossings (-1: fewer crossings).
     """
 
     ring: jax.Array
@@ -69,24 +69,27 @@ class Walk(NamedTuple):
 
 
 def checkpoints(noise: jax.Array, rad: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Upstream's 12 checkpoints (alpha, x, y), each f32[12], from the free ones' draws.
+    """Upstream's 12 checkpoints (alpha, x, y), each f32[..., 12], from the free ones' draws.
 
     Args:
-        noise: f32[10] angle of checkpoints 1..10 within their 30-degree sector, radians in ``NOISE_RANGE``.
-        rad: f32[10] their radius, upstream units in ``RAD_RANGE``.
+        noise: f32[..., 10] angle of checkpoints 1..10 within their 30-degree sector, radians in ``NOISE_RANGE``.
+        rad: f32[..., 10] their radius, upstream units in ``RAD_RANGE``.
     """
+    batch = noise.shape[:-1]
     c = jnp.arange(1, CHECKPOINTS - 1, dtype=jnp.float32)
-    alpha = jnp.concatenate([jnp.zeros(1), TWO_PI * c / CHECKPOINTS + noise, jnp.full(1, TWO_PI * (CHECKPOINTS - 1) / CHECKPOINTS)])
-    radius = jnp.concatenate([jnp.full(1, 1.5 * TRACK_RAD), rad, jnp.full(1, 1.5 * TRACK_RAD)])
+    alpha = jnp.concatenate(
+        [jnp.zeros((*batch, 1)), TWO_PI * c / CHECKPOINTS + noise, jnp.full((*batch, 1), TWO_PI * (CHECKPOINTS - 1) / CHECKPOINTS)], axis=-1
+    )
+    radius = jnp.concatenate([jnp.full((*batch, 1), 1.5 * TRACK_RAD), rad, jnp.full((*batch, 1), 1.5 * TRACK_RAD)], axis=-1)
     return alpha.astype(jnp.float32), (radius * jnp.cos(alpha)).astype(jnp.float32), (radius * jnp.sin(alpha)).astype(jnp.float32)
 
 
 def _destination(alpha, dest_i, cp_alpha):
-    """Upstream's search for the next checkpoint: (alpha, possibly less 2 pi; dest_i; checkpoint index)."""
+    """Upstream's search for the next checkpoint, [B] each: (alpha, possibly less 2 pi; dest_i; checkpoint index)."""
     k = dest_i % CHECKPOINTS
-    ahead = (jnp.arange(CHECKPOINTS) >= k) & (alpha <= cp_alpha)
-    found = ahead.any()
-    index = jnp.where(found, jnp.argmax(ahead), 0)
+    ahead = (jnp.arange(CHECKPOINTS) >= k[:, None]) & (alpha[:, None] <= cp_alpha)
+    found = ahead.any(axis=1)
+    index = jnp.where(found, jnp.argmax(ahead, axis=1), 0)
     dest_i = jnp.where(found, dest_i + index - k, dest_i + CHECKPOINTS - k)
     return jnp.where(found, alpha, alpha - TWO_PI), dest_i, index
 
@@ -99,10 +102,19 @@ def _wrap_towards(beta, alpha):
 
 
 def walk(cp_alpha: jax.Array, cp_x: jax.Array, cp_y: jax.Array) -> Walk:
-    """Upstream's walker over checkpoints f32[12] each (``tracks._walk`` for one track, in JAX)."""
+    """Upstream's walker over B checkpoint sets f32[B, 12] each (``tracks._walk`` in JAX).
 
-    def step(carry):
-        t, x, y, beta, dest_i, laps, visited, prev_alpha, first, last, ring = carry
+    All tracks step in lockstep, so the ring row written at step t is one scalar for the batch (an
+    in-place write), and the loop runs a fixed ``MAX_ITERATIONS`` steps, a finished track standing
+    still: a loop whose length depended on the data would, under an outer ``vmap``, turn every write
+    into a copy of the ring.
+    """
+    batch = cp_alpha.shape[0]
+    rows = jnp.arange(batch)
+
+    def step(t, carry):
+        x, y, beta, dest_i, laps, visited, prev_alpha, first, last, length, ring = carry
+        walking = length == 0
         alpha = jnp.arctan2(y, x)
         lap = visited & (alpha > 0)
         laps = laps + lap
@@ -110,42 +122,43 @@ def walk(cp_alpha: jax.Array, cp_x: jax.Array, cp_y: jax.Array) -> Walk:
         alpha = jnp.where(alpha < 0, alpha + TWO_PI, alpha)
         alpha, dest_i, index = _destination(alpha, dest_i, cp_alpha)
         r1x, r1y = jnp.cos(beta), jnp.sin(beta)
-        proj = (r1x * (cp_x[index] - x) + r1y * (cp_y[index] - y)) * UPSTREAM_SCALE
+        proj = (r1x * (cp_x[rows, index] - x) + r1y * (cp_y[rows, index] - y)) * UPSTREAM_SCALE
         beta = _wrap_towards(beta, alpha)
         turn = jnp.minimum(TRACK_TURN_RATE, jnp.abs(0.001 * proj))
         new_beta = beta - jnp.where(proj > 0.3, turn, 0.0) + jnp.where(proj < -0.3, turn, 0.0)
-        x, y = x - r1y * TRACK_DETAIL_STEP, y + r1x * TRACK_DETAIL_STEP
-        crossing = (t > 0) & (alpha > START_ALPHA) & (prev_alpha <= START_ALPHA)
+        x, y = jnp.where(walking, x - r1y * TRACK_DETAIL_STEP, x), jnp.where(walking, y + r1x * TRACK_DETAIL_STEP, y)
+        crossing = walking & (t > 0) & (alpha > START_ALPHA) & (prev_alpha <= START_ALPHA)
         first, last = jnp.where(crossing, last, first), jnp.where(crossing, t, last)
-        ring = ring.at[t % RING].set(jnp.stack([0.5 * beta + 0.5 * new_beta, x, y]))
-        return t + 1, x, y, new_beta, dest_i, laps, visited, alpha, first, last, ring
-
-    def going(carry):
-        t, laps = carry[0], carry[5]
-        return (t < MAX_ITERATIONS) & ((t == 0) | (laps <= 4))
+        length = jnp.where(walking & ((laps > 4) | (t + 1 == MAX_ITERATIONS)), t + 1, length)
+        written = jnp.stack([0.5 * beta + 0.5 * new_beta, x, y])[None]
+        ring = jax.lax.dynamic_update_slice(ring, jnp.where(walking, written, ring[t % RING][None]), (t % RING, 0, 0))
+        return x, y, new_beta, dest_i, laps, visited, alpha, first, last, length, ring
 
     f32, i32 = jnp.float32, jnp.int32
-    start = (i32(0), f32(1.5 * TRACK_RAD), f32(0.0), f32(0.0), i32(0), i32(0), jnp.bool_(False), f32(0.0), i32(-1), i32(-1))
-    carry = jax.lax.while_loop(going, step, (*start, jnp.zeros((RING, 3), f32)))
-    return Walk(carry[-1], carry[0], carry[-3], carry[-2])
+    full = lambda value, dtype: jnp.full(batch, value, dtype)  # noqa: E731
+    start = (full(1.5 * TRACK_RAD, f32), full(0.0, f32), full(0.0, f32), full(0, i32), full(0, i32), full(False, bool), full(0.0, f32))
+    start = (*start, full(-1, i32), full(-1, i32), full(0, i32), jnp.zeros((RING, 3, batch), f32))
+    carry = jax.lax.fori_loop(0, MAX_ITERATIONS, step, start)
+    return Walk(carry[-1], carry[-2], carry[-4], carry[-3])
 
 
 def cut(walked: Walk) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Upstream's loop ``[first, last - 1)`` and its acceptance: (xy f32[RING, 2], points i32, accepted bool).
+    """Upstream's loops ``[first, last - 1)`` and their acceptance: (xy f32[B, RING, 2], points i32[B], accepted bool[B]).
 
-    Row k of ``xy`` is step ``first + k`` (rows from ``points`` on are padding). Rejected, as upstream
+    Row k of ``xy[b]`` is step ``first + k`` (rows from ``points`` on are padding). Rejected, as upstream
     rejects: fewer than two crossings, or head and tail not glued within one step; also a loop
     that no longer fits the ring.
     """
     first, last = walked.first, walked.last
     points = last - 1 - first
-    rows = (first + jnp.arange(RING)) % RING
-    loop = walked.ring[rows]
-    head, tail = loop[0], walked.ring[(last - 2) % RING]
-    glue = jnp.hypot(jnp.cos(head[0]) * (head[1] - tail[1]), jnp.sin(head[0]) * (head[2] - tail[2]))
+    ring = jnp.moveaxis(walked.ring, -1, 0)  # [B, RING, 3]
+    rows = (first[:, None] + jnp.arange(RING)) % RING
+    loop = jnp.take_along_axis(ring, rows[..., None], axis=1)
+    head, tail = loop[:, 0], jnp.take_along_axis(ring, ((last - 2) % RING)[:, None, None], axis=1)[:, 0]
+    glue = jnp.hypot(jnp.cos(head[:, 0]) * (head[:, 1] - tail[:, 1]), jnp.sin(head[:, 0]) * (head[:, 2] - tail[:, 2]))
     fits = walked.length - first <= RING
     accepted = (first >= 1) & (points >= 3) & fits & (glue <= TRACK_DETAIL_STEP)
-    return loop[:, 1:], points, accepted
+    return loop[..., 1:], points, accepted
 
 
 def resample(xy: jax.Array, points: jax.Array, num_points: int = NUM_POINTS) -> jax.Array:
@@ -213,12 +226,12 @@ def track_from_centreline(centreline: jax.Array) -> Track:
 
 
 def build(noise: jax.Array, rad: jax.Array, num_points: int = NUM_POINTS) -> tuple[jax.Array, jax.Array]:
-    """(centreline f32[num_points, 2], accepted bool) of the track upstream's walker draws through
-    the checkpoints with free draws ``noise``, ``rad`` f32[10] each; accepted as upstream accepts
-    and inside the playable square."""
+    """(centrelines f32[B, num_points, 2], accepted bool[B]) of the tracks upstream's walker draws
+    through the checkpoints with free draws ``noise``, ``rad`` f32[B, 10] each; accepted as upstream
+    accepts and inside the playable square."""
     xy, points, accepted = cut(walk(*checkpoints(noise, rad)))
-    centreline = resample(xy, points, num_points)
-    return centreline, accepted & (jnp.abs(centreline).max() <= MAX_EXTENT)
+    centreline = jax.vmap(lambda line, count: resample(line, count, num_points))(xy, points)
+    return centreline, accepted & (jnp.abs(centreline).max(axis=(1, 2)) <= MAX_EXTENT)
 
 
 def draws(rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:

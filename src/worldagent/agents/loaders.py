@@ -2,7 +2,7 @@
 
 policy = load_agent(registry.get("racing"), "runs/ppo")       # a `worldagent train` run dir
 policy = load_agent(spec, "runs/ppo/policy")                   # the saved policy inside it
-policy = load_agent(spec, "driver")                            # a scripted policy of the spec
+policy = load_agent(spec, "driver")                            # a scripted policy of the spec (or "scripted/driver")
 policy = load_agent(spec, "agent.onnx")                        # an ONNX model (extra `onnx`)
 policy = load_agent(spec, "mymodule:act")                      # a Python callable obs batch -> actions
 policy = load_agent(spec, "ppo_racing.zip")                    # a Stable-Baselines3 model (extra `sb3`)
@@ -99,8 +99,8 @@ def load_agent(
     """
     spec = registry.get(spec)
     text = str(text)
-    if text in spec.scripted:
-        return scripted_policy(spec, text, options)
+    if text.removeprefix("scripted/") in spec.scripted:  # the explorer's label for it, too
+        return scripted_policy(spec, text.removeprefix("scripted/"), options)
     directory = policy_dir(text)
     if directory is not None:
         saved = load_policy(directory, env=spec.name, greedy=greedy)

@@ -1,0 +1,236 @@
+"""Two agents compared world by world (DESIGN.md "Diff"): paired statistics over per-world metrics.
+
+Agents A (the old one) and B (the new one) play the same W worlds with the same episode keys
+(common random numbers), so each world gives a pair and every statistic here is paired: the
+world is the unit, its R episodes are averaged first. All functions are pure and take arrays
+``[W, R]`` (or per-world means ``[W]``) of A and B.
+
+- ``paired_difference``: the mean of B − A per world with a t interval over worlds.
+- ``paired_failures``: P(failure) of each (Clopper–Pearson), the paired difference with Tango's
+  score interval (1998; its statistic at 0 is McNemar's, so it excludes 0 exactly when the
+  score test rejects), the exact conditional McNemar p-value, and the counts of worlds that
+  regressed (fail under B, pass under A) and improved.
+- ``paired_cvar``: the α-CVaR (mean of the worst α of worlds, SFL's robustness protocol) of each
+  and their difference, with a percentile bootstrap over worlds (pairs resampled together).
+- ``regressed_ranking``: the regressed worlds, likeliest under the prior N(0, I) first, each with
+  its nearest world (by latent, else by any feature) where B passes.
+
+Identical agents give differences of exactly 0 (the t and bootstrap intervals collapse to [0, 0]).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worldagent.analysis.intervals import check_confidence, clopper_pearson
+
+CVAR_ALPHA = 0.1  # the worst 10% of worlds
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_CHUNK = 100  # resamples drawn at once (memory: CHUNK x W indices)
+SAME_POINT = 1e-9  # a world this close to a regressed one is the same world, never its own neighbour
+
+
+def world_means(values) -> np.ndarray:
+    """f64[W]: per-world means of ``values`` f[W, R] (episodes averaged), or ``values`` f[W] as is."""
+    values = np.asarray(values, np.float64)
+    return values.reshape(len(values), -1).mean(axis=1) if values.ndim > 1 else values
+
+
+def paired_difference(a, b, confidence: float = 0.95) -> dict:
+    """The mean over worlds of B − A with a t interval over the W paired worlds.
+
+    Args:
+        a, b: f[W, R] (or f[W]) one metric of A and of B on the same worlds and keys.
+        confidence: the interval's level.
+
+    Returns:
+        {"a", "b": the means over worlds, "difference": mean of B − A, "low", "high": its interval
+        (NaN with one world; [d, d] when every world differs by the same d), "worlds": W}.
+    """
+    from scipy.stats import t
+
+    check_confidence(confidence)
+    a, b = world_means(a), world_means(b)
+    differences = b - a
+    count = len(differences)
+    mean = float(differences.mean()) if count else float("nan")
+    if count < 2:
+        low = high = float("nan")
+    else:
+        spread = float(t.ppf(1 - (1 - confidence) / 2, count - 1) * differences.std(ddof=1) / math.sqrt(count))
+        low, high = mean - spread, mean + spread
+    return {"a": float(a.mean()), "b": float(b.mean()), "difference": mean, "low": low, "high": high, "worlds": count}
+
+
+def _tango_statistic(regressed: int, improved: int, n: int, delta: float) -> float:
+    """Tango's score statistic for H0: p_B − p_A = ``delta`` (decreasing in ``delta``)."""
+    a = 2.0 * n
+    b = -regressed - improved + (2.0 * n - regressed + improved) * delta
+    c = -improved * delta * (1.0 - delta)
+    p_improved = (math.sqrt(max(b * b - 4.0 * a * c, 0.0)) - b) / (2.0 * a)  # restricted MLE of P(A fails, B passes)
+    variance = n * (2.0 * p_improved + delta * (1.0 - delta))
+    return (regressed - improved - n * delta) / math.sqrt(max(variance, 1e-300))
+
+
+def tango_interval(regressed: int, improved: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Tango's (1998) score interval of p_B − p_A from paired binary outcomes.
+
+    Args:
+        regressed: worlds where B fails and A passes; ``improved``: A fails and B passes.
+        n: worlds compared (concordant ones included).
+
+    Returns:
+        (low, high) within [−1, 1]; a non-degenerate interval about 0 when no world is discordant.
+    """
+    from scipy.optimize import brentq
+    from scipy.stats import norm
+
+    check_confidence(confidence)
+    if n < 1 or regressed < 0 or improved < 0 or regressed + improved > n:
+        raise ValueError(f"regressed={regressed}, improved={improved}, n={n}; need 0 <= regressed + improved <= n, n >= 1.")
+    z = float(norm.ppf(1 - (1 - confidence) / 2))
+    estimate = (regressed - improved) / n
+    edge = 1.0 - 1e-12
+    score = lambda delta, target: _tango_statistic(regressed, improved, n, delta) - target  # noqa: E731
+    low = -1.0 if score(-edge, z) <= 0 else brentq(score, -edge, estimate, args=(z,), xtol=1e-12)
+    high = 1.0 if score(edge, -z) >= 0 else brentq(score, estimate, edge, args=(-z,), xtol=1e-12)
+    return float(low), float(high)
+
+
+def mcnemar_p(regressed: int, improved: int) -> float:
+    """The exact conditional (McNemar) two-sided p-value of p_B = p_A: a binomial test of the
+    discordant worlds, regressed ~ Binomial(regressed + improved, 1/2); 1 when none is discordant."""
+    from scipy.stats import binom
+
+    discordant = regressed + improved
+    if discordant == 0:
+        return 1.0
+    return float(min(1.0, 2.0 * binom.cdf(min(regressed, improved), discordant, 0.5)))
+
+
+def paired_failures(fail_a, fail_b, confidence: float = 0.95) -> dict:
+    """P(failure) of each agent and their paired difference.
+
+    Args:
+        fail_a, fail_b: bool[W] which worlds fail under A and under B (the same worlds).
+
+    Returns:
+        {"a", "b": {"p", "low", "high", "failing"} (Clopper–Pearson), "difference": {"value"
+        (p_B − p_A), "low", "high" (Tango), "p_value" (exact McNemar)}, "regressed", "improved",
+        "worlds"}.
+    """
+    fail_a, fail_b = np.asarray(fail_a, bool), np.asarray(fail_b, bool)
+    if fail_a.shape != fail_b.shape or fail_a.ndim != 1 or not len(fail_a):
+        raise ValueError(f"fail_a {fail_a.shape} and fail_b {fail_b.shape}: pass two bool[W] of the same worlds, W >= 1.")
+    n = len(fail_a)
+    regressed, improved = int(np.sum(fail_b & ~fail_a)), int(np.sum(fail_a & ~fail_b))
+
+    def rate(fails: np.ndarray) -> dict:
+        k = int(fails.sum())
+        low, high = clopper_pearson(k, n, confidence)
+        return {"p": k / n, "low": low, "high": high, "failing": k}
+
+    low, high = tango_interval(regressed, improved, n, confidence)
+    difference = {"value": (regressed - improved) / n, "low": low, "high": high, "p_value": mcnemar_p(regressed, improved)}
+    return {"a": rate(fail_a), "b": rate(fail_b), "difference": difference, "regressed": regressed, "improved": improved, "worlds": n}
+
+
+def tail_count(worlds: int, alpha: float) -> int:
+    """How many worlds the α-tail holds: ⌈α · W⌉, at least one."""
+    if not 0 < alpha <= 1:
+        raise ValueError(f"alpha={alpha}; pass a fraction in (0, 1], e.g. 0.1.")
+    return max(1, math.ceil(alpha * worlds - 1e-9))
+
+
+def cvar(values, alpha: float = CVAR_ALPHA, axis: int = -1) -> np.ndarray:
+    """α-CVaR: the mean of the lowest ⌈α · W⌉ per-world values along ``axis`` (higher is better)."""
+    values = np.asarray(values, np.float64)
+    k = tail_count(values.shape[axis], alpha)
+    return np.partition(values, k - 1, axis=axis).take(np.arange(k), axis=axis).mean(axis=axis)
+
+
+def paired_cvar(a, b, alpha: float = CVAR_ALPHA, confidence: float = 0.95, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> dict:
+    """α-CVaR of A and of B over the same worlds and its paired difference, bootstrapped over worlds.
+
+    Each resample draws W worlds with replacement and takes both agents' values on them, so the
+    pairing (and the common random numbers) carries into the interval.
+
+    Args:
+        a, b: f[W, R] (or f[W]) a metric where higher is better (e.g. the return).
+        alpha: the tail's share of worlds.
+        resamples: bootstrap resamples; ``seed`` their randomness.
+
+    Returns:
+        {"alpha", "a", "b", "difference" (CVaR_B − CVaR_A), "low", "high" (percentile interval), "tail": worlds in the tail}.
+    """
+    check_confidence(confidence)
+    a, b = world_means(a), world_means(b)
+    rng = np.random.default_rng([seed, 40])
+    differences = []
+    for start in range(0, resamples, BOOTSTRAP_CHUNK):
+        picks = rng.integers(0, len(a), (min(BOOTSTRAP_CHUNK, resamples - start), len(a)))
+        differences.append(cvar(b[picks], alpha) - cvar(a[picks], alpha))
+    tail = (1 - confidence) / 2
+    low, high = np.quantile(np.concatenate(differences), [tail, 1 - tail]) if resamples else (np.nan, np.nan)
+    cvar_a, cvar_b = float(cvar(a, alpha)), float(cvar(b, alpha))
+    return {
+        "alpha": alpha,
+        "a": cvar_a,
+        "b": cvar_b,
+        "difference": cvar_b - cvar_a,
+        "low": float(low),
+        "high": float(high),
+        "tail": tail_count(len(a), alpha),
+    }
+
+
+def log_prior(latents) -> np.ndarray:
+    """f64[n]: log N(z; 0, I) of latents f[n, d] (higher: G(z) is likelier to be drawn)."""
+    latents = np.asarray(latents, np.float64)
+    return -0.5 * (latents**2).sum(axis=-1) - 0.5 * latents.shape[-1] * np.log(2 * np.pi)
+
+
+def nearest(points, candidates) -> tuple[np.ndarray, np.ndarray]:
+    """(index into ``candidates`` f[m, d], distance) of the nearest candidate to each point f[n, d]
+    that is not the point itself (farther than ``SAME_POINT``); (-1, inf) where there is none."""
+    points, candidates = np.asarray(points, np.float64), np.asarray(candidates, np.float64)
+    if not len(points) or not len(candidates):
+        return np.full(len(points), -1), np.full(len(points), np.inf)
+    distances = np.linalg.norm(points[:, None, :] - candidates[None, :, :], axis=-1)
+    distances = np.where(distances > SAME_POINT, distances, np.inf)
+    found = distances.argmin(axis=1)
+    closest = distances[np.arange(len(points)), found]
+    return np.where(np.isfinite(closest), found, -1), closest
+
+
+def regressed_ranking(fail_a, fail_b, features, latents=None) -> list[dict]:
+    """The regressed worlds (B fails, A passes), each with its nearest world where B passes.
+
+    Args:
+        fail_a, fail_b: bool[W] which worlds fail under A and under B.
+        features: f[W, d] where worlds lie, for the nearest passing world (latents, or e.g. a world's cells).
+        latents: f[W, dim] the worlds' latents, or None (worlds not drawn from G(z)).
+
+    Returns:
+        [{"world": index, "log_prior" (None without latents), "nearest_passing": index or None,
+        "distance"}], likeliest under N(0, I) first when there are latents, else in world order.
+    """
+    fail_a, fail_b = np.asarray(fail_a, bool), np.asarray(fail_b, bool)
+    regressed = np.flatnonzero(fail_b & ~fail_a)
+    prior = log_prior(latents)[regressed] if latents is not None else np.zeros(len(regressed))
+    order = regressed[np.argsort(-prior, kind="stable")]
+    prior = prior[np.argsort(-prior, kind="stable")]
+    passing = np.flatnonzero(~fail_b)
+    features = np.asarray(features, np.float64).reshape(len(fail_a), -1)
+    near, distance = nearest(features[order], features[passing])
+    return [
+        {
+            "world": int(world),
+            "log_prior": float(prior[k]) if latents is not None else None,
+            "nearest_passing": int(passing[near[k]]) if near[k] >= 0 else None,
+            "distance": float(distance[k]) if near[k] >= 0 else None,
+        }
+        for k, world in enumerate(order)
+    ]

@@ -1,0 +1,135 @@
+"""``worldagent diff``'s result as text: a Markdown report section (``diff.md``, a CI job summary) and console lines."""
+
+from __future__ import annotations
+
+import math
+
+
+def number(value, digits: int = 4) -> str:
+    """A number for a table: 4 significant digits, "n/a" for None or NaN."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+def interval(row: dict, low: str = "low", high: str = "high") -> str:
+    return f"[{number(row[low])}, {number(row[high])}]"
+
+
+def agent_name(record: dict) -> str:
+    return f"{record.get('path')} ({record.get('kind')})"
+
+
+def metric_table(worlds: dict) -> list[str]:
+    rows = ["| metric | A | B | B − A | 95% interval |", "|---|---|---|---|---|"]
+    for name, row in worlds["metrics"].items():
+        rows.append(f"| {name} | {number(row['a'])} | {number(row['b'])} | {number(row['difference'])} | {interval(row)} |")
+    return rows
+
+
+def failure_lines(worlds: dict) -> list[str]:
+    failure = worlds["failure"]
+    a, b, difference = failure["a"], failure["b"], failure["difference"]
+    return [
+        f"P(failure), failure = `{failure['event']}`: A {number(a['p'])} {interval(a)}, B {number(b['p'])} {interval(b)}; "
+        f"B − A {number(difference['value'])} {interval(difference)} (Tango's paired score interval; exact McNemar p = {number(difference['p_value'], 3)}).",
+        f"{failure['regressed']} worlds regressed (fail under B, pass under A), {failure['improved']} improved, of {failure['worlds']}.",
+    ]
+
+
+def cvar_line(worlds: dict) -> str:
+    risk = worlds["cvar"]
+    return (
+        f"α-CVaR ({risk['alpha']:.0%} worst worlds, {risk['tail']} of them) of {risk['metric']}: A {number(risk['a'])}, B {number(risk['b'])}; "
+        f"B − A {number(risk['difference'])} {interval(risk)} (bootstrap over worlds)."
+    )
+
+
+def regressed_table(rows: list[dict], title: str) -> list[str]:
+    if not rows:
+        return []
+    shown = list(rows[0]["a"])
+    head = ["| world | log N(z; 0, I) | " + " | ".join(f"{m} A → B" for m in shown) + " | nearest world where B passes |"]
+    head.append("|---" * (len(shown) + 3) + "|")
+    for row in rows:
+        near = row["nearest_passing"]
+        where = "none" if near is None else f"{near['campaign']} {near['generation']}/{near['slot']} (distance {number(near['distance'], 3)})"
+        changes = " | ".join(f"{number(row['a'][m])} → {number(row['b'][m])}" for m in shown)
+        head.append(f"| {row['campaign']} {row['generation']}/{row['slot']} | {number(row['log_prior'])} | {changes} | {where} |")
+    return [f"**{title}**", "", *head]
+
+
+def search_lines(search: dict) -> list[str]:
+    best = search["best"]
+    direction = "highest" if search["maximize"] else "lowest"
+    first = search["first_regressed"]
+    found = f"the first at evaluation {first}" if first else "none"
+    return [
+        f"Differential search ({search['search']}, campaign `{search['campaign']}`): {search['evaluations']} worlds, {search['episodes']} episodes, "
+        f"{direction} {search['metric']}(B) − {search['metric']}(A).",
+        f"Most extreme world: {best['campaign']} {best['generation']}/{best['slot']}, {search['metric']} A {number(best['a'])} → B {number(best['b'])} "
+        f"(B − A {number(best['score'])}); {search['regressed']} regressed worlds found, {found}.",
+    ]
+
+
+def gate_lines(gate: dict | None) -> list[str]:
+    if gate is None:
+        return []
+    rows = [f"`{row['condition']}`: {number(row['value'])} → {'FAILS' if row['holds'] else 'passes'}" for row in gate["conditions"]]
+    return [f"Gate: **{'failed' if gate['failed'] else 'passed'}**.", "", *[f"- {row}" for row in rows]]
+
+
+def markdown(result: dict) -> str:
+    """The report section of a ``differential.diff`` result (with its gate, if any)."""
+    agents = result["agents"]
+    lines = [
+        f"## Which worlds got worse? ({result['env']})",
+        "",
+        f"A (old): {agent_name(agents['a'])}; B (new): {agent_name(agents['b'])}. "
+        f"Both played every world with the same episode keys (seed {result['seed']}, {result['repeats']} episodes per world); "
+        f"{result['episodes']:,} episodes in all.",
+        "",
+    ]
+    worlds = result.get("worlds")
+    if worlds:
+        lines += [f"On {worlds['worlds']} worlds ({source_text(result['source'])}), campaign `{worlds['campaign']}`:", "", *metric_table(worlds), ""]
+        lines += [*failure_lines(worlds), "", cvar_line(worlds), ""]
+        lines += [*regressed_table(worlds["regressed_worlds"], "Regressed worlds, likeliest under the prior first"), ""]
+    if result.get("search"):
+        lines += [*search_lines(result["search"]), ""]
+        lines += [*regressed_table(result["search"]["regressed_worlds"], "Regressed worlds the search found"), ""]
+    lines += gate_lines(result.get("gate"))
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def source_text(source: dict | None) -> str:
+    if not source:
+        return "none"
+    if "prior" in source:
+        return f"G(z), z ~ N(0, I): {source['prior']} samples"
+    if "campaign" in source:
+        return f"campaign {source['campaign']} of {source['store']}"
+    return "datasets " + ", ".join(source.get("datasets", []))
+
+
+def console_lines(result: dict) -> list[str]:
+    """The few lines ``worldagent diff`` prints."""
+    lines = []
+    worlds = result.get("worlds")
+    if worlds:
+        main = worlds["cvar"]["metric"]
+        row = worlds["metrics"][main]
+        lines.append(
+            f"{worlds['worlds']} worlds x {worlds['repeats']} episodes x 2 agents ({worlds['episodes']:,} episodes): "
+            f"{main} A {number(row['a'])}, B {number(row['b'])}, B − A {number(row['difference'])} {interval(row)}"
+        )
+        lines += failure_lines(worlds) + [cvar_line(worlds)]
+        for row in worlds["regressed_worlds"][:5]:
+            near = row["nearest_passing"]
+            where = "" if near is None else f"; nearest where B passes: slot {near['slot']} (distance {number(near['distance'], 3)})"
+            lines.append(f"  regressed: {row['campaign']} slot {row['slot']}, log prior {number(row['log_prior'])}{where}")
+    if result.get("search"):
+        lines += search_lines(result["search"])
+    for row in (result.get("gate") or {}).get("conditions", []):
+        lines.append(f"gate: {row['condition']} (value {number(row['value'])}) {'FAILS' if row['holds'] else 'passes'}")
+    return lines

@@ -103,10 +103,15 @@ def corner_rectangles(key: jax.Array, config: MapConfig) -> tuple[jax.Array, jax
     present = rank < num_regions
     height = uniform_int(u[1 + NUM_CORNERS : 1 + 2 * NUM_CORNERS], low, high)
     width = uniform_int(u[1 + 2 * NUM_CORNERS :], low, high)
+    return present, corner_bounds(height, width, size)
+
+
+def corner_bounds(height: jax.Array, width: jax.Array, size: int) -> jax.Array:
+    """int32[4, 4]: [row0, row1, col0, col1) of rectangles int32[4] high and wide grown from the corners TL, TR, BL, BR."""
     top, left = np.array([True, True, False, False]), np.array([True, False, True, False])
     row0 = jnp.where(top, 0, size - height)
     col0 = jnp.where(left, 0, size - width)
-    return present, jnp.stack([row0, row0 + height, col0, col0 + width], axis=1)
+    return jnp.stack([row0, row0 + height, col0, col0 + width], axis=1)
 
 
 def rectangle_masks(present: jax.Array, bounds: jax.Array, size: int) -> jax.Array:
@@ -153,18 +158,23 @@ def bordering_walls(union: jax.Array) -> jax.Array:
     return union & ~neighbours(union, True, RING).all(axis=0)
 
 
+def entrance_candidates(walls: jax.Array, group_masks: jax.Array) -> jax.Array:
+    """bool[4, H, W]: each merged region's wall cells with its inside on one side and the outside opposite."""
+    union = group_masks.any(axis=0)
+    inside, outside = union & ~walls, ~union
+    up, down, left, right = neighbours(inside, False, [(-1, 0), (1, 0), (0, -1), (0, 1)])
+    out_up, out_down, out_left, out_right = neighbours(outside, False, [(-1, 0), (1, 0), (0, -1), (0, 1)])
+    through = (up & out_down) | (out_up & down) | (left & out_right) | (out_left & right)
+    return walls & through & group_masks
+
+
 def carve_entrances(key: jax.Array, walls: jax.Array, group_masks: jax.Array, config: MapConfig) -> jax.Array:
     """Step 3b: bool[H, W], one entrance cell per merged region that gets one.
 
     An entrance is a wall cell with the region's inside on one side and the outside on the
     opposite side, so removing it always opens a passage.
     """
-    union = group_masks.any(axis=0)
-    inside, outside = union & ~walls, ~union
-    up, down, left, right = neighbours(inside, False, [(-1, 0), (1, 0), (0, -1), (0, 1)])
-    out_up, out_down, out_left, out_right = neighbours(outside, False, [(-1, 0), (1, 0), (0, -1), (0, 1)])
-    through = (up & out_down) | (out_up & down) | (left & out_right) | (out_left & right)
-    candidates = walls & through & group_masks  # [4, H, W]
+    candidates = entrance_candidates(walls, group_masks)
     u = jax.random.uniform(key, (NUM_CORNERS * (1 + candidates[0].size),))
     scores = jnp.where(candidates, u[NUM_CORNERS:].reshape(candidates.shape), -1.0)
     flat = scores.reshape(NUM_CORNERS, -1)
@@ -203,15 +213,19 @@ class Layout(NamedTuple):
     entrances: jax.Array  # bool[H, W] the carved entrance cells
 
 
-def generate_layout(key: jax.Array, config: MapConfig = MapConfig()) -> Layout:
-    """Steps 1–3 of the generator: regions, merged groups, walls and entrances."""
-    key_regions, key_entrances = jax.random.split(key)
-    present, bounds = corner_rectangles(key_regions, config)
-    rectangles = rectangle_masks(present, bounds, config.size)
+def region_walls(present: jax.Array, bounds: jax.Array, size: int) -> tuple[jax.Array, jax.Array]:
+    """Steps 2 and 3a for rectangles ``present`` bool[4], ``bounds`` int32[4, 4]: (group_masks bool[4, H, W], walls bool[H, W])."""
+    rectangles = rectangle_masks(present, bounds, size)
     group = merge_groups(present, bounds)
     member = group[None, :] == jnp.arange(NUM_CORNERS)[:, None]  # [group, region]
     group_masks = (rectangles[None] & member[:, :, None, None]).any(axis=1)
-    walls = bordering_walls(rectangles.any(axis=0))
+    return group_masks, bordering_walls(rectangles.any(axis=0))
+
+
+def generate_layout(key: jax.Array, config: MapConfig = MapConfig()) -> Layout:
+    """Steps 1–3 of the generator: regions, merged groups, walls and entrances."""
+    key_regions, key_entrances = jax.random.split(key)
+    group_masks, walls = region_walls(*corner_rectangles(key_regions, config), config.size)
     return Layout(group_masks, walls, carve_entrances(key_entrances, walls, group_masks, config))
 
 

@@ -7,7 +7,8 @@ logits near zero, and thresholding them (``walls="threshold"``) leaves broken wa
 enclose nothing. Snapping to a dataset layout keeps the procedural generator's closed rooms,
 so worlds in which walls cut the tagger off from the others (the paper's Figure 8b) occur as
 often in G(z) as the decoder's wall signal allows. Measured with ``worldagent generator report``
-(``structure.tagger_separated``); numbers in ``docs/harvest.md``.
+(``structure.tagger_separated``); numbers in ``docs/harvest.md``. Snapping is closed: G(z) returns
+dataset layouts only; ``open_repair.OpenRooms`` returns new layouts the generator could make.
 
 Apples. Exactly K apples on the K free cells with the highest apple logits (the paper keeps the
 number of resources the same across worlds); the spawn corners are always free. If fewer than K
@@ -58,6 +59,23 @@ def repair_maps(logits: jax.Array, apples: int, layouts: jax.Array | None = None
         walls = wall_logit > 0
     else:
         walls = layouts[nearest_index(wall_logit.reshape(1, -1), layouts)[0]].reshape(height, width) > 0.5
+    return place_apples(walls, wall_logit, apple_logit, apples)
+
+
+def place_apples(walls: jax.Array, wall_logit: jax.Array, apple_logit: jax.Array, apples: int) -> HarvestMap:
+    """The apple step of every harvest repair: exactly ``apples`` apples, free spawn corners.
+
+    Args:
+        walls: bool[H, W] the repaired walls.
+        wall_logit, apple_logit: f32[H, W] decoded logits, clipped to ``LOGIT_CLIP``.
+        apples: K, the number of apples.
+
+    Returns:
+        ``HarvestMap`` with bool walls and apples [H, W]: apples on the K free non-corner cells
+        with the highest apple logits; where fewer are free, on the walls with the lowest logits
+        (those walls are cleared).
+    """
+    height, width = walls.shape
     corners = jnp.asarray(corner_mask(height, width))
     walls = walls & ~corners
     # Free cells first, by apple logit; then wall cells, least confident walls first; never corners.

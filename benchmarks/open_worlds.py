@@ -14,7 +14,9 @@ on ``--samples`` latents z ~ N(0, I):
   seeds) maximising it, against the dataset's maximum;
 - decode cost: warm milliseconds per world of one jitted G(z) call of ``--samples`` latents.
 
-Recorded in ``benchmarks/results/open-worlds.json`` with the machine.
+Recorded in ``benchmarks/results/open-worlds-<backend>.json`` with the machine; ``--figures DIR``
+also draws, per environment, the first ``FIGURE_WORLDS`` open decodes above their nearest dataset
+worlds (``DIR/open-worlds-<env>.png``, for docs/open-worlds.md).
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ from worldagent.errors import WorldagentError  # noqa: E402
 from worldagent.worlds.generator import build_generator, load_generator  # noqa: E402
 
 CHUNK = 500  # latents per jitted call
+FIGURE_WORLDS = 6
+FIGURE_SIZE = 160  # pixels per world
 POPULATION = 21  # the paper's CMA-ES population (§5.2.2)
 DATASET_DESCRIBED = 10_000  # dataset worlds whose descriptors are measured
 
@@ -68,6 +72,33 @@ def nearest_distance(cells: np.ndarray, dataset_cells: np.ndarray) -> np.ndarray
         hamming = block.sum(1)[:, None] + b_ones[None, :] - 2 * block @ b.T
         out[i : i + 250] = hamming.min(1) / a.shape[1]
     return out
+
+
+def nearest_index(cells: np.ndarray, dataset_cells: np.ndarray) -> np.ndarray:
+    """int[N]: the dataset world nearest (fewest differing cells) to each world."""
+    a, b = cells.astype(np.float32), dataset_cells.astype(np.float32)
+    return np.argmin(a.sum(1)[:, None] + b.sum(1)[None, :] - 2 * a @ b.T, axis=1)
+
+
+def figure(spec, generator, dataset, path: Path) -> Path:
+    """The first ``FIGURE_WORLDS`` decodes of z ~ N(0, I) (top row) above their nearest dataset worlds (bottom row)."""
+    from PIL import Image, ImageDraw
+
+    z = np.asarray(jax.random.normal(jax.random.key(0), (FIGURE_WORLDS, generator.latent_dim)))
+    worlds = decode(generator, z)
+    nearest = nearest_index(np.asarray(spec.cells(worlds), np.uint8), dataset.cells)
+    caption = 18  # pixels above each row
+    sheet = Image.new("RGB", (FIGURE_WORLDS * FIGURE_SIZE, 2 * (FIGURE_SIZE + caption)), "white")
+    draw = ImageDraw.Draw(sheet)
+    draw.text((4, 3), f"G(z), z ~ N(0, I), {generator.repair_name} repair", fill="black")
+    draw.text((4, FIGURE_SIZE + caption + 3), "the nearest dataset world (fewest differing cells)", fill="black")
+    for i in range(FIGURE_WORLDS):
+        sheet.paste(spec.pictures.world(one(worlds, i), FIGURE_SIZE).convert("RGB"), (i * FIGURE_SIZE, caption))
+        below = spec.pictures.world(dataset.world(int(nearest[i])), FIGURE_SIZE).convert("RGB")
+        sheet.paste(below, (i * FIGURE_SIZE, FIGURE_SIZE + 2 * caption))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sheet.save(path)
+    return path
 
 
 def spread(values: np.ndarray) -> dict:
@@ -131,6 +162,7 @@ def main() -> None:
     parser.add_argument("--budget", type=int, default=420, help="Decodes per CMA-ES push.")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--push", action="append", default=[], help="ENV=DESCRIPTOR to push past the dataset's maximum (repeatable).")
+    parser.add_argument("--figures", type=Path, default=None, help="draw open decodes beside their nearest dataset worlds here")
     args = parser.parse_args()
     pushes: dict[str, list[str]] = {}
     for text in args.push:
@@ -154,6 +186,8 @@ def main() -> None:
             print(f"{env}: {name}", flush=True)
             generator = build_generator(vae, dataset, repair_name=name)
             entry["repairs"][name] = measure(generator, dataset, spec, args.samples, pushes.get(env, []), args.budget, args.seeds, reference)
+            if args.figures is not None and name != spec.default_repair:
+                entry["repairs"][name]["figure"] = str(figure(spec, generator, dataset, args.figures / f"open-worlds-{env}-{name}.png"))
             shown = {k: entry["repairs"][name][k] for k in ("validity", "new_share", "distinct", "decode_ms_per_world")}
             print(f"  {shown}", flush=True)
         result["envs"][env] = entry

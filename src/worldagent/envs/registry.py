@@ -249,8 +249,9 @@ class EnvSpec:
         )  # == : bound classmethods are new objects each time
 
     def repair_factory(self, name: str | None = None) -> Callable[[Any, Mapping[str, Any]], Any]:
-        """The repair called ``name`` (None: the default); unknown names list the known ones."""
-        if name is None or name == self.default_repair:
+        """The repair called ``name`` (None or ``default``: the default; a generator saved before its env named
+        its repairs recorded ``default``); unknown names list the known ones."""
+        if name is None or name in (self.default_repair, DEFAULT_REPAIR):
             return self.repair
         if name not in self.repairs:
             raise WorldagentError(f"{self.name} has no repair {name!r}; use one of: {', '.join(self.repair_names)}.")

@@ -153,7 +153,8 @@ def build_generator(
         )
     repair = repair if repair is not None else make_repair(dataset, repair_config, repair_name)
     folded = repair.fold(*logits_layer(vae.params)) if hasattr(repair, "fold") else None
-    name = repair_name or registry.get(dataset.env).default_repair
+    spec = registry.get(dataset.env)
+    name = spec.default_repair if repair_name in (None, DEFAULT_REPAIR) else repair_name
     return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape), name, folded)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worldagent.envs.harvest.env import BEAM_LENGTH, NUM_AGENTS, VIEW_BEHIND, VIEW_SIZE
+from worldagent.envs.harvest.open_repair import OpenRooms
 from worldagent.envs.harvest.repair import HarvestRepair, threshold_maps
 from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
@@ -87,6 +88,13 @@ def cut_off_from_tagger(world) -> np.ndarray:
     regions, _ = label(~walls)
     corners = np.array([regions[r, c] for r, c in spawn_corners(*walls.shape)])
     return corners[1:] != corners[0]
+
+
+def closed_room(world) -> float:
+    """1.0 when walls split the free cells into more than one area (4-connected moves): a room without an entrance."""
+    from scipy.ndimage import label
+
+    return float(label(~np.asarray(world.walls, bool))[1] > 1)
 
 
 def tagger_isolated(world) -> float:
@@ -237,6 +245,7 @@ SPEC = register(
         cells=cells,
         cell_shape=(2, DEFAULT_SIZE, DEFAULT_SIZE),
         repair=HarvestRepair.from_dataset,
+        repairs={"nearest": HarvestRepair.from_dataset, "open": OpenRooms.from_dataset},
         metrics=Metrics(
             main="group_reward",
             names=("group_reward", "conflict", "equality", "sustainability", "peace"),
@@ -246,6 +255,7 @@ SPEC = register(
                 "wall_share": wall_share,
                 "tagger_separated": tagger_separated,
                 "tagger_isolated": tagger_isolated,
+                "closed_room": closed_room,
                 "apple_clustering": apple_clustering,
                 "apple_distance": apple_distance,
                 "largest_patch": largest_patch,

@@ -26,7 +26,10 @@ seed) ``--repeats`` times, and we report per agent:
   training updates (its learning curve): how often it still met failures on its arm's worlds;
 - ``buffer_on_target`` (the ``target`` arm, toward an event): the share of its last buffer's worlds
   whose recent episodes meet the event, what training was replaying at the end;
-- the training wall time of each arm (its seeds together, from the runs' curves: resumes add up).
+- the training wall time of each arm (its seeds together, from the runs' curves: resumes add up);
+- ``held_out_mean``, ``held_out_p_failure``, ``held_out_failing_worlds`` (with ``--held-out``): the
+  same on a given set of worlds none of the arms trained on by construction, e.g. the failing
+  worlds of ``transfer_failures.py`` that most ``dr`` agents fail.
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
 ``dr``'s. Every step is cached under ``--work``: a killed run resumes. Writes
@@ -258,7 +261,7 @@ def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
     """{stat: {arm: mean_and_ci over seeds, + overlaps_dr}}."""
     out: dict = {}
     kept = dict.fromkeys(name for seeds in per_seed.values() for values in seeds.values() for name in values)
-    for stat in (*STATS, *(name for name in kept if name.startswith(("mean_", "training_", "buffer_")))):
+    for stat in (*STATS, *(name for name in kept if name.startswith(("mean_", "training_", "buffer_", "held_out_")))):
         out[stat] = {
             arm: mean_and_ci([values[stat] for values in seeds.values()])
             for arm, seeds in per_seed.items()
@@ -296,6 +299,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--curriculum-set", action="append", default=[], help="NAME=VALUE for every curriculum arm (docs/curriculum.md)")
     parser.add_argument("--generator", type=Path, default=None, help="default: runs/quick/ENV/generator")
     parser.add_argument("--eval-worlds", type=int, default=1000)
+    parser.add_argument(
+        "--held-out",
+        type=Path,
+        default=None,
+        help="an .npz of latents (transfer_failures.py's transferable worlds): every agent is scored on them too",
+    )
     parser.add_argument("--repeats", type=int, default=8)
     parser.add_argument("--work", type=Path, default=None)
     parser.add_argument("--note", action="append", default=[], help="a sentence the JSON keeps (e.g. what else ran on the machine)")
@@ -316,6 +325,8 @@ def main(argv=None) -> dict:
     _, params = spec.make_env(options)
     z, worlds = evaluation_worlds(generator, args.eval_worlds)
     settings = parse_curriculum_settings(args.curriculum_set)
+    held_latents = np.load(args.held_out)["latents"] if args.held_out is not None else np.zeros((0, generator.latent_dim))
+    held_out = generate(generator, held_latents) if len(held_latents) else None  # none transferred: nothing to score
 
     arms, per_seed = {}, {}
     for arm in set(args.arms) & set(INFLUENCE_ARMS):
@@ -344,6 +355,10 @@ def main(argv=None) -> dict:
                 metrics, took = evaluate_agent(spec, agent_dir, generator, worlds, args.repeats, cache)
                 per_seed[arm][seed] = agent_statistics(spec, metrics, params)
                 per_seed[arm][seed] |= late_training(Path(agent_dir), (spec.metrics.main, *spec.metrics.highlighted))
+                if held_out is not None:
+                    cache = work / "eval" / f"{arm}-s{seed}-held-out-{args.held_out.stem}.npz"
+                    scored = agent_statistics(spec, evaluate_agent(spec, agent_dir, generator, held_out, args.repeats, cache)[0], params)
+                    per_seed[arm][seed] |= {f"held_out_{name}": scored[name] for name in ("mean", "p_failure", "failing_worlds")}
                 if arm == "target" and args.maximize is None:
                     per_seed[arm][seed] |= buffer_on_target(Path(agent_dir))
                 if args.atlas_budget:
@@ -364,6 +379,7 @@ def main(argv=None) -> dict:
             "generator": str(generator_dir),
             "repair": generator.repair_name,
             "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED, "alpha": ALPHA, "failure": spec.failure},
+            "held_out": None if args.held_out is None else {"file": str(args.held_out), "worlds": int(len(held_latents))},
             "atlas": {"budget": args.atlas_budget, "method": "CMA-ME over the env's default descriptors", "seed": 0},
             "influence": {"selection": spec.selection, "worlds_per_round": args.offline_search, "rounds": args.rounds},
             "target": {"text": target_text, "maximize": args.maximize},

@@ -290,7 +290,8 @@ def prior_set(store: RunStore, setup: DiffSetup, worlds: int, *, seed: int = 0, 
         name, setup.spec.name, main, False, "random", int(worlds), int(seed), setup.generator.latent_dim, config,
         agent=agent_record(setup.b.policy), extra={"diff": setup.records()},
     )  # fmt: skip
-    return run_campaign(store, spec, PairedObjective(setup, main), resume=True, progress=progress, backend=setup.backend)[:worlds]
+    title = f"diff on {worlds} worlds G(z)"
+    return run_campaign(store, spec, PairedObjective(setup, main), resume=True, progress=progress, backend=setup.backend, title=title)[:worlds]
 
 
 def fixed_set(store: RunStore, setup: DiffSetup, world_set: WorldSet, *, seed: int = 0, progress: bool = True) -> list[Evaluation]:
@@ -357,7 +358,8 @@ def differential_search(
         agent=agent_record(setup.b.policy), extra=extra,
     )  # fmt: skip
     objective = PairedObjective(setup, metric)
-    found = run_campaign(store, spec, objective, resume=True, progress=progress, backend=setup.backend, optimiser=optimiser)
+    title = f"{search} {'max' if maximize else 'min'}imising {metric}(B) − {metric}(A)"
+    found = run_campaign(store, spec, objective, resume=True, progress=progress, backend=setup.backend, optimiser=optimiser, title=title)
     return found, name
 
 

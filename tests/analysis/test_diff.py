@@ -77,6 +77,21 @@ def test_cvar_is_the_mean_of_the_worst_share_of_worlds():
     assert risk["difference"] == pytest.approx(-10) and risk["high"] < 0 and risk["tail"] == 5
 
 
+def test_the_bca_interval_of_a_cvar_difference_uses_an_exact_jackknife():
+    rng = np.random.default_rng(4)
+    for worlds in (2, 3, 11, 60):
+        values = np.round(rng.normal(size=worlds), 1)  # ties too
+        slow = [diff.cvar(np.delete(values, i), 0.1) for i in range(worlds)]
+        assert diff.leave_one_out_cvar(values, 0.1) == pytest.approx(slow)
+    a = rng.gamma(2.0, 10.0, 400)
+    b = a + 2.0 - 20.0 * (rng.random(400) < 0.1)
+    risk = diff.paired_cvar(a, b, seed=0)
+    assert risk["low"] < risk["difference"] < risk["high"] < 0
+    resampled = rng.normal(size=4000)
+    percentiles = tuple(np.quantile(resampled, [0.025, 0.975]))  # no bias (the median), no skew: plain percentiles
+    assert diff.bca_interval(resampled, float(np.median(resampled)), np.zeros(0), 0.95) == pytest.approx(percentiles)
+
+
 def test_regressed_worlds_rank_by_prior_likelihood_with_their_nearest_passing_world():
     latents = np.array([[3.0, 0.0], [0.5, 0.0], [1.0, 1.0], [0.6, 0.0], [2.9, 0.0], [0.5, 0.0]])
     fail_a = np.array([0, 0, 0, 0, 0, 0], bool)

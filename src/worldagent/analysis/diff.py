@@ -11,7 +11,7 @@ world is the unit, its R episodes are averaged first. All functions are pure and
   score test rejects), the exact conditional McNemar p-value, and the counts of worlds that
   regressed (fail under B, pass under A) and improved.
 - ``paired_cvar``: the α-CVaR (mean of the worst α of worlds, SFL's robustness protocol) of each
-  and their difference, with a percentile bootstrap over worlds (pairs resampled together).
+  and their difference, with a BCa bootstrap over worlds (pairs resampled together).
 - ``regressed_ranking``: the regressed worlds, likeliest under the prior N(0, I) first, each with
   its nearest world (by latent, else by any feature) where B passes.
 
@@ -163,7 +163,7 @@ def paired_cvar(a, b, alpha: float = CVAR_ALPHA, confidence: float = 0.95, resam
         resamples: bootstrap resamples; ``seed`` their randomness.
 
     Returns:
-        {"alpha", "a", "b", "difference" (CVaR_B − CVaR_A), "low", "high" (percentile interval), "tail": worlds in the tail}.
+        {"alpha", "a", "b", "difference" (CVaR_B − CVaR_A), "low", "high" (BCa interval), "tail": worlds in the tail}.
     """
     check_confidence(confidence)
     a, b = world_means(a), world_means(b)
@@ -172,18 +172,48 @@ def paired_cvar(a, b, alpha: float = CVAR_ALPHA, confidence: float = 0.95, resam
     for start in range(0, resamples, BOOTSTRAP_CHUNK):
         picks = rng.integers(0, len(a), (min(BOOTSTRAP_CHUNK, resamples - start), len(a)))
         differences.append(cvar(b[picks], alpha) - cvar(a[picks], alpha))
-    tail = (1 - confidence) / 2
-    low, high = np.quantile(np.concatenate(differences), [tail, 1 - tail]) if resamples else (np.nan, np.nan)
     cvar_a, cvar_b = float(cvar(a, alpha)), float(cvar(b, alpha))
-    return {
-        "alpha": alpha,
-        "a": cvar_a,
-        "b": cvar_b,
-        "difference": cvar_b - cvar_a,
-        "low": float(low),
-        "high": float(high),
-        "tail": tail_count(len(a), alpha),
-    }
+    resampled = np.concatenate(differences) if differences else np.zeros(0)
+    low, high = bca_interval(resampled, cvar_b - cvar_a, jackknife_cvar(a, b, alpha), confidence)
+    return {"alpha": alpha, "a": cvar_a, "b": cvar_b, "difference": cvar_b - cvar_a, "low": low, "high": high, "tail": tail_count(len(a), alpha)}
+
+
+def leave_one_out_cvar(values: np.ndarray, alpha: float) -> np.ndarray:
+    """f64[W]: the α-CVaR of ``values`` f[W] with each world left out in turn, from one sort (W ≥ 2)."""
+    k = tail_count(len(values) - 1, alpha)
+    rank = np.empty(len(values), int)
+    rank[np.argsort(values, kind="stable")] = np.arange(len(values))
+    sums = np.concatenate([[0.0], np.cumsum(np.sort(values))])
+    return np.where(rank < k, (sums[k + 1] - values) / k, sums[k] / k)  # a tail world out: the next one comes in
+
+
+def jackknife_cvar(a: np.ndarray, b: np.ndarray, alpha: float) -> np.ndarray:
+    """f64[W]: CVaR_B − CVaR_A with each world left out in turn (BCa's acceleration; empty for one world)."""
+    if len(a) < 2:
+        return np.zeros(0)
+    return leave_one_out_cvar(b, alpha) - leave_one_out_cvar(a, alpha)
+
+
+def bca_interval(resampled: np.ndarray, estimate: float, jackknife: np.ndarray, confidence: float) -> tuple[float, float]:
+    """Efron's bias-corrected and accelerated bootstrap interval from resampled statistics f64[B].
+
+    A tail mean is skewed and biased in small samples; BCa corrects both (on skewed returns at 100
+    worlds, percentile intervals covered 91% and BCa 93%, ``benchmarks/diff_coverage.py``). Ties with
+    the estimate count half (identical agents: every resample is 0, and so is the interval).
+    """
+    from scipy.stats import norm
+
+    if not len(resampled):
+        return float("nan"), float("nan")
+    below = np.mean(resampled < estimate) + 0.5 * np.mean(resampled == estimate)
+    bias = float(norm.ppf(np.clip(below, 1e-6, 1 - 1e-6)))
+    spread = jackknife.mean() - jackknife if len(jackknife) else np.zeros(1)
+    denominator = 6.0 * float(np.sum(spread**2)) ** 1.5
+    acceleration = float(np.sum(spread**3)) / denominator if denominator > 0 else 0.0
+    z = norm.ppf([(1 - confidence) / 2, 1 - (1 - confidence) / 2])
+    levels = norm.cdf(bias + (bias + z) / (1 - acceleration * (bias + z)))
+    low, high = np.quantile(resampled, levels)
+    return float(low), float(high)
 
 
 def log_prior(latents) -> np.ndarray:

@@ -153,6 +153,7 @@ def register(app: typer.Typer) -> None:
                 run_store, setup, worlds=world_set, search=search, budget=budget, objective=objective, maximize=not minimize,
                 descriptors=names, cells=cells, failure=failure, metric=metric, gate=gate, seed=seed, progress=not quiet,
             )  # fmt: skip
+        result["generator"] = str(generator.resolve()) if generator else None  # `worldagent explore OUT` opens it
         write_text(out / "diff.json", json.dumps(plain(result), indent=1))
         write_text(out / "diff.md", markdown(result))
         for line in console_lines(result):

@@ -8,12 +8,27 @@ import typer
 
 from worldagent.commands.console import console, friendly_errors
 from worldagent.errors import WorldagentError
+from worldagent.runs import MANIFEST_FILE
+
+DIFF_FILE = "diff.json"  # what `worldagent diff` writes into its --out
 
 
 def check_port(port: int) -> int:
     if not 1 <= port <= 65535:
         raise WorldagentError(f"--port {port}: pick a port between 1 and 65535 (default 8765).")
     return port
+
+
+def diff_run(run_dir: Path):
+    """The run of a ``worldagent diff --out`` directory: its store, with the generator its diff.json names."""
+    import json
+
+    from worldagent.runs import Run
+
+    recorded = json.loads((run_dir / DIFF_FILE).read_text())
+    if not recorded.get("generator"):
+        raise WorldagentError(f"{run_dir} compared worlds without a generator; pass --store {run_dir / 'store.sqlite'} and --generator DIR.")
+    return Run.of_parts(run_dir / "store.sqlite", Path(recorded["generator"]), None, recorded.get("env"))
 
 
 def open_run(run_dir: Path | None, store: Path | None, generator: Path | None, agent: str, env: str):
@@ -25,6 +40,8 @@ def open_run(run_dir: Path | None, store: Path | None, generator: Path | None, a
             raise WorldagentError("give either RUN_DIR or --store with --generator (and --agent), not both.")
         if not run_dir.is_dir():
             raise WorldagentError(f"{run_dir} is not a directory; pass a run directory `worldagent reproduce --out` wrote.")
+        if (run_dir / DIFF_FILE).is_file() and not (run_dir / MANIFEST_FILE).is_file():
+            return diff_run(run_dir)
         return Run.open(run_dir)
     if store is None or generator is None:
         raise WorldagentError("pass a run directory (worldagent explore runs/quick), or --store and --generator (and --agent).")
@@ -37,7 +54,9 @@ def register(app: typer.Typer) -> None:
     @app.command()
     @friendly_errors
     def explore(
-        run_dir: Path = typer.Argument(None, help="A run directory `worldagent reproduce` wrote (its manifest.json, stores, generator, agents)."),
+        run_dir: Path = typer.Argument(
+            None, help="A run directory `worldagent reproduce` wrote (its manifest.json, stores, generator, agents), or a `worldagent diff --out`."
+        ),
         store: Path = typer.Option(None, "--store", help="Instead of RUN_DIR: a run store (store.sqlite) of campaigns."),
         generator: Path = typer.Option(None, "--generator", help="With --store: the generator its campaigns searched."),
         agent: str = typer.Option("", "--agent", help="With --store: the agent to play (a train run, a scripted policy's name, ...)."),

@@ -21,6 +21,7 @@ API (``ENV``: an environment of the run)::
     POST /api/ENV/play                    {"world": I | "z": [...], "agent", "episodes", "seed", "size"}: episodes played now
     GET  /api/ENV/failures                failing worlds     (?event=, by=likelihood|severity, limit=)
     GET  /api/ENV/atlas                   the atlas heat map (?name=)
+    GET  /api/ENV/diff                    a `worldagent diff` campaign's regressed worlds (?campaign=, event=, limit=)
     GET  /api/ENV/export.npz|.json        a world as a one-world dataset / JSON  (?world=I or ?z=...)
     POST /api/ENV/save                    {"world": I | "z": [...]}: write it to <run>/ENV/explorer/ (the only write)
 """
@@ -187,6 +188,15 @@ def add_views(app: FastAPI, session: Session, Env: Any) -> None:
     @app.get("/api/{env}/atlas")
     def atlas(env: Env, name: Annotated[str | None, Query(max_length=200)] = None) -> dict:
         return env.atlas(name)
+
+    @app.get("/api/{env}/diff")
+    def diff(
+        env: Env,
+        campaign: Annotated[str | None, Query(max_length=200)] = None,
+        event: Annotated[str | None, Query(max_length=200)] = None,
+        limit: Annotated[int, Query(ge=1, le=MAX_FAILURES)] = 50,
+    ) -> dict:
+        return env.diff(campaign, event, limit)
 
 
 def add_world_actions(app: FastAPI, Env: Any) -> None:

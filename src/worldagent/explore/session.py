@@ -23,6 +23,7 @@ from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.events import parse_selection
 from worldagent.explore import views
+from worldagent.explore.diff import diff_agents, diff_campaigns, diff_view
 from worldagent.explore.episodes import episodes_payload, replay_marked
 from worldagent.runs import Run
 
@@ -42,6 +43,7 @@ def agent_sources(run: Run, env: str) -> dict[str, str]:
     agents_dir = run.layout(env).influence_dir / "agents"
     if agents_dir.is_dir():
         found |= {f"influence/{d.name}": str(d) for d in sorted(agents_dir.iterdir()) if (d / "policy").is_dir()}
+    found |= diff_agents(diff_campaigns(run, env))  # the two agents of each `worldagent diff` in the store
     return found | {f"scripted/{name}": name for name in spec.scripted}
 
 
@@ -109,6 +111,7 @@ class EnvSession:
             "has_generator": self.run.has_generator(self.env),
             "animates": spec.pictures.locate is not None,
             "atlases": self.atlas_names(),
+            "diffs": list(diff_campaigns(self.run, self.env)),
         }
 
     # -- stored worlds --------------------------------------------------------------------------
@@ -243,6 +246,10 @@ class EnvSession:
             "maximize": atlas.maximize,
             "cells": cells,
         }
+
+    def diff(self, campaign: str | None, event: str | None, limit: int) -> dict:
+        """A diff campaign's regressed worlds (``explore.diff.diff_view``)."""
+        return diff_view(self, campaign, event, limit)
 
     # -- G(z) and the agents ---------------------------------------------------------------------
 

@@ -111,12 +111,13 @@ def run_campaign(
     progress: bool = True,
     backend: Any = None,
     optimiser: Any = None,
+    title: str | None = None,
 ) -> list[Evaluation]:
     """Run (or resume) a campaign to its budget; returns all its evaluations in order.
 
     ``backend`` (``evaluation.backends``; default local) runs each generation's batches.
     ``optimiser``: a fresh optimiser built by the caller (e.g. the atlas's ``QDOptimiser``);
-    default ``make_optimiser(spec.optimiser, ...)``.
+    default ``make_optimiser(spec.optimiser, ...)``. ``title``: the progress bar's (default: what it optimises).
     """
     spec.validate()
     backend = backend or LocalBackend()
@@ -136,9 +137,8 @@ def run_campaign(
     done, generation = 0, 0
     pick = max if spec.maximize else min
     best = pick([e.score for e in stored.values() if np.isfinite(e.score)], default=float("nan"))
-    with progress_bar(
-        f"{spec.optimiser} {'max' if spec.maximize else 'min'}imising {spec.objective}", total=spec.budget, enabled=progress
-    ) as advance:
+    title = title or f"{spec.optimiser} {'max' if spec.maximize else 'min'}imising {spec.objective}"
+    with progress_bar(title, total=spec.budget, enabled=progress) as advance:
         while done < spec.budget:
             z = optimiser.ask(optimiser.batch_size if optimiser.whole_generations else min(optimiser.batch_size, spec.budget - done))
             scores = np.full(len(z), np.nan)

@@ -3,7 +3,7 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-const state = { run: null, env: null, map: null, metric: null, world: null, z: null, baseZ: null, players: [null, null], atlas: null };
+const state = { run: null, env: null, map: null, metric: null, world: null, z: null, baseZ: null, players: [null, null], atlas: null, diff: null };
 const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
 const TRAILS = ["#1f5fe0", "#e0421f", "#1fa84a", "#c51fe0", "#e0a01f", "#1fc7e0", "#7a4b1f", "#555555"];
 const MAP_PAD = 24;
@@ -52,6 +52,7 @@ function show(view) {
   if (view === "map" && state.map) drawMap();
   if (view === "atlas") loadAtlas();
   if (view === "failures") loadFailures();
+  if (view === "diff") loadDiff();
   if (view !== "world") writeHash({ view, env: state.env, metric: state.metric });
 }
 
@@ -67,6 +68,9 @@ async function selectEnv(name) {
     $(id).innerHTML = keep + info.agents.map((a) => `<option>${a}</option>`).join("");
   }
   $("event").placeholder = info.failure || "e.g. return < 0";
+  $("diff-event").placeholder = info.failure || "e.g. return < 0";
+  $("diff-tab").hidden = !info.diffs.length;
+  $("diff-campaign").innerHTML = info.diffs.map((d) => `<option>${d}</option>`).join("");
   buildSliders(info.latent_dim);
   state.atlas = null;
   status(`loading the map of ${name} ...`);
@@ -422,6 +426,38 @@ async function loadFailures() {
   }
 }
 
+// -- diff: two agents' regressed worlds -----------------------------------------------------
+
+async function loadDiff() {
+  const event = $("diff-event").value.trim(), campaign = $("diff-campaign").value;
+  const query = new URLSearchParams({ limit: "20", ...(campaign ? { campaign } : {}), ...(event ? { event } : {}) });
+  const table = $("diff-table");
+  try {
+    const found = await api(`/api/${state.env}/diff?${query}`);
+    state.diff = found;
+    $("diff-summary").textContent = `${found.campaign}: ${found.regressed} of ${found.worlds} worlds regressed (${found.event}), ${found.improved} improved`;
+    const names = found.rows.length ? Object.keys(found.rows[0].a) : [];
+    const picture = (i) => `<img loading="lazy" data-world="${i}" src="/api/${state.env}/world/${i}.png?size=72" alt="world ${i}"> ${i}`;
+    table.innerHTML = `<tr><th>#</th><th>regressed world</th><th>log p(z)</th>${names.map((m) => `<th>${m} A → B</th>`).join("")}<th>nearest world where B passes</th><th>latent distance</th></tr>` +
+      found.rows.map((row, k) => `<tr><td class="num">${k + 1}</td><td>${picture(row.index)}</td><td class="num">${fmt(row.log_prior)}</td>` +
+        names.map((m) => `<td class="num">${fmt(row.a[m])} → ${fmt(row.b[m])}</td>`).join("") +
+        (row.nearest_passing === null ? "<td>none</td><td></td>" : `<td>${picture(row.nearest_passing)}</td><td class="num">${fmt(row.distance)}</td>`) +
+        "</tr>").join("");
+  } catch (error) {
+    status(error.message, true);
+    table.innerHTML = "";
+  }
+}
+
+async function openDiff(index) {
+  // the World view with the diff's A and B as its two agents, played at once
+  const [a, b] = (state.diff && state.diff.agents) || [];
+  if (a) $("agent").value = a;
+  if (b) $("agent2").value = b;
+  await openWorld(index);
+  if (a || b) play();
+}
+
 // -- start --------------------------------------------------------------------------------
 
 async function start() {
@@ -447,6 +483,9 @@ $("map-canvas").addEventListener("click", (e) => { const i = nearestPoint(e); if
 $("atlas-canvas").addEventListener("click", (e) => { const cell = atlasCellAt(e); if (cell) openWorld(cell.world); });
 $("failures-table").addEventListener("click", (e) => { if (e.target.dataset.world) openWorld(Number(e.target.dataset.world)); });
 $("failures-go").addEventListener("click", loadFailures);
+$("diff-table").addEventListener("click", (e) => { if (e.target.dataset.world) openDiff(Number(e.target.dataset.world)); });
+$("diff-go").addEventListener("click", loadDiff);
+$("diff-campaign").addEventListener("change", loadDiff);
 $("rank-by").addEventListener("change", loadFailures);
 $("play").addEventListener("click", play);
 $("save").addEventListener("click", saveWorld);
@@ -454,5 +493,5 @@ $("agent").addEventListener("change", updateExport);
 $("agent2").addEventListener("change", updateExport);
 $("reset-z").addEventListener("click", () => { if (state.baseZ) { setSliders(state.baseZ); state.z = state.baseZ.slice(); redrawLatent(); } });
 for (const button of document.querySelectorAll("#tabs button")) button.addEventListener("click", () => show(button.dataset.view));
-window.explorer = { state, openWorld, openLatent, play, drawFrame };  // for scripts and the browser tests
+window.explorer = { state, openWorld, openLatent, play, drawFrame, openDiff };  // for scripts and the browser tests
 start();

@@ -88,14 +88,15 @@ def figure(spec, generator, dataset, path: Path) -> Path:
     worlds = decode(generator, z)
     nearest = nearest_index(np.asarray(spec.cells(worlds), np.uint8), dataset.cells)
     caption = 18  # pixels above each row
-    sheet = Image.new("RGB", (FIGURE_WORLDS * FIGURE_SIZE, 2 * (FIGURE_SIZE + caption)), "white")
+    step = FIGURE_SIZE + 6  # a white gutter between worlds
+    sheet = Image.new("RGB", (FIGURE_WORLDS * step, 2 * (FIGURE_SIZE + caption)), "white")
     draw = ImageDraw.Draw(sheet)
     draw.text((4, 3), f"G(z), z ~ N(0, I), {generator.repair_name} repair", fill="black")
     draw.text((4, FIGURE_SIZE + caption + 3), "the nearest dataset world (fewest differing cells)", fill="black")
     for i in range(FIGURE_WORLDS):
-        sheet.paste(spec.pictures.world(one(worlds, i), FIGURE_SIZE).convert("RGB"), (i * FIGURE_SIZE, caption))
+        sheet.paste(spec.pictures.world(one(worlds, i), FIGURE_SIZE).convert("RGB"), (i * step, caption))
         below = spec.pictures.world(dataset.world(int(nearest[i])), FIGURE_SIZE).convert("RGB")
-        sheet.paste(below, (i * FIGURE_SIZE, FIGURE_SIZE + 2 * caption))
+        sheet.paste(below, (i * step, FIGURE_SIZE + 2 * caption))
     path.parent.mkdir(parents=True, exist_ok=True)
     sheet.save(path)
     return path

@@ -5,8 +5,8 @@
 
 For each repair of the generator's VAE (``EnvSpec.repairs``: the paper's ``nearest``, ``open``) and
 each agent: a failure atlas (CMA-ME over the env's default descriptors, ``--budget`` worlds,
-``--repeats`` episodes each) finds the worlds where the agent meets the env's failure event
-(racing: ``crash_rate > 0.5``); every distinct failing world is replayed by every other agent
+``--repeats`` episodes each, pushing the failure event's metric towards it: racing's crash rate
+up) finds the worlds where the agent meets the env's failure event (racing: ``crash_rate > 0.5``); every distinct failing world is replayed by every other agent
 (``--repeats`` episodes, the same keys), and a world *transfers* when at least ``--transfer`` of
 the other agents also fail on it. Per repair and agent: failing worlds found, and how many
 transfer; the failure matrix (world x agent) is kept, and the transferable worlds are written to
@@ -50,7 +50,9 @@ def world_key(world) -> str:
 
 def failing_latents(store, setup, spec, budget: int, repeats: int, name: str, progress: bool) -> np.ndarray:
     """f32[F, L]: latents of the distinct failing worlds an atlas of ``budget`` worlds finds on the agent."""
-    found = experiments.atlas(store, setup, spec.metrics.main, budget=budget, seed=0, name=name, progress=progress)["evaluations"]
+    clause = parse_selection(spec.failure, spec.name).clauses[0]  # the atlas pushes the event's first metric towards it
+    maximize = clause.op in (">", ">=")
+    found = experiments.atlas(store, setup, clause.metric, maximize=maximize, budget=budget, seed=0, name=name, progress=progress)["evaluations"]
     failing = np.flatnonzero(parse_selection(spec.failure, spec.name).mask(found))
     if not len(failing):
         return np.zeros((0, setup.generator.latent_dim), np.float32)

@@ -12,7 +12,8 @@ the other agents also fail on it. Per repair and agent: failing worlds found, an
 transfer; the failure matrix (world x agent) is kept, and the transferable worlds are written to
 ``--out`` (an ``.npz`` of their latents and fields, per repair) for held-out evaluation.
 
-Recorded in ``benchmarks/results/transfer-failures.json``.
+Recorded in ``benchmarks/results/transfer-failures.json`` under ``runs[FAILURE]`` (``--failure``: another
+event than the env's, e.g. a lower threshold; the atlases of one event are reused by a rerun).
 """
 
 from __future__ import annotations
@@ -48,27 +49,30 @@ def world_key(world) -> str:
     return digest.hexdigest()
 
 
-def failing_latents(store, setup, spec, budget: int, repeats: int, name: str, progress: bool) -> np.ndarray:
-    """f32[F, L]: latents of the distinct failing worlds an atlas of ``budget`` worlds finds on the agent."""
-    clause = parse_selection(spec.failure, spec.name).clauses[0]  # the atlas pushes the event's first metric towards it
+def failing_latents(store, setup, spec, failure: str, budget: int, name: str, progress: bool) -> tuple[np.ndarray, float]:
+    """(f32[F, L] latents of the distinct worlds with ``failure`` an atlas of ``budget`` worlds finds on
+    the agent, the most extreme world mean of the event's metric it found)."""
+    selection = parse_selection(failure, spec.name)
+    clause = selection.clauses[0]  # the atlas pushes the event's first metric towards it
     maximize = clause.op in (">", ">=")
     found = experiments.atlas(store, setup, clause.metric, maximize=maximize, budget=budget, seed=0, name=name, progress=progress)["evaluations"]
-    failing = np.flatnonzero(parse_selection(spec.failure, spec.name).mask(found))
+    extreme = float(max(e.score for e in found) if maximize else min(e.score for e in found))
+    failing = np.flatnonzero(selection.mask(found))
     if not len(failing):
-        return np.zeros((0, setup.generator.latent_dim), np.float32)
+        return np.zeros((0, setup.generator.latent_dim), np.float32), extreme
     latents = np.stack([found[i].latent for i in failing])
     worlds = generate(setup.generator, latents)
     keys = [world_key(jax.tree_util.tree_map(lambda leaf, i=i: leaf[i], worlds)) for i in range(len(latents))]
     first = sorted({key: i for i, key in reversed(list(enumerate(keys)))}.values())
-    return latents[first].astype(np.float32)
+    return latents[first].astype(np.float32), extreme
 
 
-def fails(spec, setup, worlds, repeats: int) -> np.ndarray:
-    """bool[W]: the failure event holds on each world's ``repeats`` episodes."""
+def fails(spec, setup, worlds, repeats: int, failure: str) -> np.ndarray:
+    """bool[W]: the event ``failure`` holds on each world's ``repeats`` episodes."""
     metrics = evaluate(setup.env, setup.policy, worlds, repeats, jax.random.key(REPLAY_SEED), setup.params)
     metrics = spec.metrics.with_derived({k: np.asarray(v, np.float64) for k, v in metrics.items()}, setup.params)
     failing = np.ones(len(metrics[spec.metrics.main]), bool)
-    for clause in parse_selection(spec.failure, spec.name).clauses:
+    for clause in parse_selection(failure, spec.name).clauses:
         failing &= clause.holds(np.asarray(metrics[clause.metric]).mean(axis=1))
     return failing
 
@@ -77,22 +81,23 @@ def one_repair(spec, generator, agents: list[str], args, store) -> tuple[dict, n
     """Per agent: failing worlds found and transferred, the failure matrix; and the transferable latents."""
     setups = [experiments.setup(spec.name, agent, generator, repeats=args.repeats) for agent in agents]
     found = [
-        failing_latents(store, setup, spec, args.budget, args.repeats, f"{generator.repair_name}-a{i}", not args.quiet)
+        failing_latents(store, setup, spec, args.failure, args.budget, f"{generator.repair_name}-a{i}", not args.quiet)
         for i, setup in enumerate(setups)
     ]
     per_agent, transferable = [], []
-    for i, latents in enumerate(found):
+    for i, (latents, extreme) in enumerate(found):
         matrix = np.zeros((len(latents), len(agents)), bool)
         if len(latents):
             worlds = generate(generator, latents)
             for j, setup in enumerate(setups):
-                matrix[:, j] = fails(spec, setup, worlds, args.repeats)
+                matrix[:, j] = fails(spec, setup, worlds, args.repeats, args.failure)
         others = np.delete(matrix, i, axis=1).sum(axis=1) if len(latents) else np.zeros(0, int)
         transfers = others >= args.transfer
         transferable.append(latents[transfers])
         per_agent.append(
             {
                 "agent": agents[i],
+                "most_extreme_found": extreme,
                 "failing_worlds": int(len(latents)),
                 "replayed_failing_by_self": int(matrix[:, i].sum()) if len(latents) else 0,
                 "transferable": int(transfers.sum()),
@@ -119,14 +124,17 @@ def main() -> None:
     parser.add_argument("--transfer", type=int, default=3, help="other agents that must also fail for a world to transfer")
     parser.add_argument("--work", type=Path, default=Path("runs/transfer-failures"))
     parser.add_argument("--out", type=Path, default=None, help="transferable worlds (default: WORK/transferable-REPAIR.npz)")
+    parser.add_argument("--failure", default=None, help="the event that counts as failing (default: the env's failure event)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args()
     _, vae, dataset = load_generator(args.generator)
     spec = registry.get(dataset.env)
+    args.failure = args.failure or spec.failure
     result = {
         "env": spec.name,
         "generator": str(args.generator),
-        "failure": spec.failure,
+        "agents": args.agents,
+        "failure": args.failure,
         "budget": args.budget,
         "repeats": args.repeats,
         "transfer_threshold": f">= {args.transfer} of the other {len(args.agents) - 1} agents also fail",
@@ -137,14 +145,17 @@ def main() -> None:
         generator = build_generator(vae, dataset, repair_name=name)
         with RunStore(args.work / f"atlas-{name}.sqlite") as store:
             summary, latents = one_repair(spec, generator, args.agents, args, store)
-        out = args.out or args.work / f"transferable-{name}.npz"
+        out = args.out or args.work / f"transferable-{name}-{args.failure.replace(' ', '')}.npz"
         worlds = generate(generator, latents) if len(latents) else None
         fields = {f"world/{k}": np.asarray(v) for k, v in (vars(worlds).items() if worlds is not None else [])}
         np.savez(out, latents=latents, **fields)
         result["repairs"][name] = {**summary, "transferable_worlds_file": str(out)}
     result["machine"] = describe_machine()
     result["command"] = "python benchmarks/transfer_failures.py " + " ".join(sys.argv[1:])
-    path = write_text(RESULTS / "transfer-failures.json", json.dumps(result, indent=1))
+    path = RESULTS / "transfer-failures.json"
+    runs = json.loads(path.read_text()).get("runs", {}) if path.is_file() else {}
+    runs[args.failure] = result  # one entry per failure event: a lower threshold says how near the default came
+    write_text(path, json.dumps({"runs": runs}, indent=1))
     print(f"wrote {path}")
 
 

@@ -25,7 +25,9 @@ def repair_settings(texts: list[str]) -> tuple[str | None, dict]:
             chosen = name.strip()
             continue
         if not sep or not name.strip():
-            raise WorldagentError(f"--repair {text!r}: name one repair (e.g. --repair open) and write settings as NAME=VALUE, e.g. --repair apples=40.")
+            raise WorldagentError(
+                f"--repair {text!r}: name one repair (e.g. --repair open) and write settings as NAME=VALUE, e.g. --repair apples=40."
+            )
         for kind in (int, float, str):
             try:
                 settings[name.strip()] = kind(value.strip())
@@ -35,7 +37,9 @@ def repair_settings(texts: list[str]) -> tuple[str | None, dict]:
     return chosen, settings
 
 
-def train_generator(env: str, out: Path, dataset_path: Path | None, n: int, seed: int, config, repair: dict, progress: bool, repair_name: str | None = None):
+def train_generator(
+    env: str, out: Path, dataset_path: Path | None, n: int, seed: int, config, repair: dict, progress: bool, repair_name: str | None = None
+):
     """Train the VAE (resuming a checkpoint in ``out``), save G(z) with the repair called
     ``repair_name`` (None: the env's default); returns (the trained VAE, the repair's settings,
     defaults included). The repair is made first: a bad name or settings cost no training."""

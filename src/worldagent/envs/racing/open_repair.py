@@ -16,7 +16,7 @@ one CarRacing's generator could draw, valid by construction, yet almost never a 
    projected towards the centre of the ranges, step by step, until the walker accepts it.
 
 On CarRacing tracks the map rebuilds the track it was shown with footprint IoU 0.93 (median),
-0.89 (10th percentile) (``tests/envs/racing/test_open_repair.py``). Decoding is pure JAX, so G(z)
+0.89 (10th percentile) (``tests/envs/racing/test_open_tracks.py``). Decoding is pure JAX, so G(z)
 stays usable inside jitted training programs; its cost is measured by ``benchmarks/open_worlds.py``.
 """
 

@@ -32,7 +32,10 @@ seed) ``--repeats`` times, and we report per agent:
   worlds of ``transfer_failures.py`` that most ``dr`` agents fail.
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
-``dr``'s. Every step is cached under ``--work``: a killed run resumes. Writes
+``dr``'s. Beside them, ``pooled_vs_dr``: each arm against ``dr`` over all seeds' agents and all
+evaluation worlds at once, paired by world (every agent plays the same worlds with the same
+episode keys), with a hierarchical bootstrap over seeds and worlds (``analysis.diff.pooled_difference``),
+and whether that interval excludes 0. Every step is cached under ``--work``: a killed run resumes. Writes
 ``benchmarks/results/curriculum-<env>.json``.
 """
 
@@ -54,6 +57,7 @@ from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.many import ManyRun, train_many  # noqa: E402
 from worldagent.agents.training import CURVE_FILE, read_curve  # noqa: E402
+from worldagent.analysis.diff import cvar, pooled_difference  # noqa: E402
 from worldagent.analysis.intervals import clopper_pearson  # noqa: E402
 from worldagent.curricula import label, make_curriculum, parse_curriculum_settings, snapshots  # noqa: E402
 from worldagent.curricula.scores import target_score  # noqa: E402
@@ -235,15 +239,23 @@ def atlas_worst(spec, agent_dir: str, generator, repeats: int, budget: int, stor
     return float(spec.metrics.normalise(np.float64(worst), setup.params)) if spec.metrics.bounds is not None else float(worst)
 
 
-def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
-    """mean, cvar10, p_failure (+ interval), worst of one agent (see module docstring)."""
+def world_values(spec, metrics: dict[str, np.ndarray], params) -> dict[str, np.ndarray]:
+    """One agent's per-world values: ``score`` f64[W] (the main metric's world means, normalised where
+    the env has bounds) and ``failing`` f64[W] (1 where the env's failure event holds)."""
     main = metrics[spec.metrics.main].mean(axis=1)
-    score = spec.metrics.normalise(main, params) if spec.metrics.bounds is not None else main
-    worst_first = np.sort(score)
-    tail = max(1, int(np.ceil(ALPHA * len(score))))
-    failing = np.ones(len(score), bool)
+    failing = np.ones(len(main), bool)
     for clause in parse_selection(spec.failure, spec.name).clauses:
         failing &= clause.holds(metrics[clause.metric].mean(axis=1))
+    score = spec.metrics.normalise(main, params) if spec.metrics.bounds is not None else main
+    return {"score": np.asarray(score, np.float64), "failing": failing.astype(np.float64)}
+
+
+def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
+    """mean, cvar10, p_failure (+ interval), worst of one agent (see module docstring)."""
+    values = world_values(spec, metrics, params)
+    score, failing = values["score"], values["failing"].astype(bool)
+    worst_first = np.sort(score)
+    tail = max(1, int(np.ceil(ALPHA * len(score))))
     k, n = int(failing.sum()), len(failing)
     low, high = clopper_pearson(k, n)
     return {
@@ -255,6 +267,30 @@ def agent_statistics(spec, metrics: dict[str, np.ndarray], params) -> dict:
         "failing_worlds": k,
         **{f"mean_{name}": float(metrics[name].mean()) for name in compared_metrics(spec)},
     }
+
+
+POOLED = {  # statistic of an arm's per-world values f[S, W]: what the per-seed tables average over seeds
+    "mean": ("score", lambda values: float(values.mean())),
+    "cvar10": ("score", lambda values: float(cvar(values, ALPHA, axis=1).mean())),
+    "p_failure": ("failing", lambda values: float(values.mean())),
+}
+
+
+def pooled_vs_dr(values: dict[str, list[dict[str, np.ndarray]]]) -> dict:
+    """{stat: {arm: pooled_difference against dr, + "apart" (the interval excludes 0)}}: every arm
+    against ``dr`` over all seeds' agents on the shared evaluation worlds (a hierarchical bootstrap
+    over seeds and worlds, ``analysis.diff.pooled_difference``)."""
+    if "dr" not in values:
+        return {}
+    out: dict = {}
+    for stat, (field, statistic) in POOLED.items():
+        base = np.stack([agent[field] for agent in values["dr"]])
+        out[stat] = {}
+        for arm, agents in values.items():
+            if arm != "dr":
+                found = pooled_difference(np.stack([agent[field] for agent in agents]), base, statistic)
+                out[stat][arm] = {**found, "apart": bool(found["low"] > 0 or found["high"] < 0)}
+    return out
 
 
 def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
@@ -328,7 +364,7 @@ def main(argv=None) -> dict:
     held_latents = np.load(args.held_out)["latents"] if args.held_out is not None else np.zeros((0, generator.latent_dim))
     held_out = generate(generator, held_latents) if len(held_latents) else None  # none transferred: nothing to score
 
-    arms, per_seed = {}, {}
+    arms, per_seed, worlds_of = {}, {}, {}
     for arm in set(args.arms) & set(INFLUENCE_ARMS):
         if "dr" not in args.arms or args.arms.index(arm) < args.arms.index("dr"):
             raise SystemExit(f"--arms: the {arm} arm selects its worlds with dr's first agent; list dr before {arm}.")
@@ -354,6 +390,7 @@ def main(argv=None) -> dict:
                 cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
                 metrics, took = evaluate_agent(spec, agent_dir, generator, worlds, args.repeats, cache)
                 per_seed[arm][seed] = agent_statistics(spec, metrics, params)
+                worlds_of.setdefault(arm, []).append(world_values(spec, metrics, params))
                 per_seed[arm][seed] |= late_training(Path(agent_dir), (spec.metrics.main, *spec.metrics.highlighted))
                 if held_out is not None:
                     cache = work / "eval" / f"{arm}-s{seed}-held-out-{args.held_out.stem}.npz"
@@ -388,6 +425,7 @@ def main(argv=None) -> dict:
             "arms_pending": args.arms[done:],  # written after every arm: a partial file says what is still to come
             "per_seed": per_seed,
             "summary": compare(per_seed),
+            "pooled_vs_dr": pooled_vs_dr(worlds_of),
             "notes": args.note,
             "machine": describe_machine(),
             "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),

@@ -264,3 +264,49 @@ def regressed_ranking(fail_a, fail_b, features, latents=None) -> list[dict]:
         }
         for k, world in enumerate(order)
     ]
+
+
+def pooled_difference(arm, base, statistic, confidence: float = 0.95, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> dict:
+    """An arm against a base arm, pooled over training seeds and paired by world: a hierarchical bootstrap.
+
+    Benchmarks train S agents per arm and let every agent play the same W worlds with the same
+    episode keys. Seeds are independent runs (seed s of one arm is no pair of seed s of another),
+    worlds are shared. Each resample draws W worlds with replacement, the same for both arms (the
+    pairing by world and keys carries into the interval), and each arm's seeds with replacement,
+    independently; ``statistic`` of the arm minus that of the base gives one difference, and the
+    percentile interval of the resamples is returned. Why a bootstrap and not a mixed model: it
+    needs no model of how worlds and seeds interact, and the statistics (a CVaR, a failure share)
+    are not means a linear model would fit.
+
+    Args:
+        arm, base: f[S, W] per-world values (episodes averaged) of each arm's S agents (S may differ).
+        statistic: ``values f[S, W] -> float`` (e.g. the mean over seeds of each seed's α-CVaR).
+        resamples: bootstrap resamples; ``seed`` their randomness.
+
+    Returns:
+        {"arm", "base": the statistic of each, "difference": arm − base, "low", "high", "seeds": [S_arm, S_base], "worlds": W}.
+    """
+    check_confidence(confidence)
+    arm, base = np.asarray(arm, np.float64), np.asarray(base, np.float64)
+    if arm.ndim != 2 or base.ndim != 2 or arm.shape[1] != base.shape[1]:
+        raise ValueError(f"arm {arm.shape} and base {base.shape}: pass f[S, W] each, on the same W worlds.")
+    rng = np.random.default_rng([seed, 41])
+    worlds = arm.shape[1]
+    differences = np.empty(resamples)
+    for i in range(resamples):
+        picked = rng.integers(0, worlds, worlds)
+        ours = arm[rng.integers(0, len(arm), len(arm))][:, picked]
+        theirs = base[rng.integers(0, len(base), len(base))][:, picked]
+        differences[i] = statistic(ours) - statistic(theirs)
+    tail = (1 - confidence) / 2
+    low, high = (float(q) for q in np.quantile(differences, [tail, 1 - tail])) if resamples else (float("nan"),) * 2
+    estimate_arm, estimate_base = float(statistic(arm)), float(statistic(base))
+    return {
+        "arm": estimate_arm,
+        "base": estimate_base,
+        "difference": estimate_arm - estimate_base,
+        "low": low,
+        "high": high,
+        "seeds": [len(arm), len(base)],
+        "worlds": worlds,
+    }

@@ -109,7 +109,7 @@ def test_play_returns_each_episode_on_the_picture(client):
 def test_play_carries_the_marks_step_by_step(client, toy_run):
     """The toy's one mark, its goal, is there from the start and vanishes at the step the agent reaches it."""
     played = client.post("/api/toy/play", json={"world": 2, "agent": "scripted/random", "episodes": 4, "seed": 2, "size": 70}).json()
-    assert played["marks"] == {"goal": {"shape": "dot", "colour": "#ff00ff", "radius": 4.2}}  # 0.06 of 70 px
+    assert played["marks"] == {"goal": {"shape": "dot", "colour": "#ff00ff", "radius": 4.2, "label": "goal"}}  # 0.06 of 70 px; no label: its kind
     goal = np.argwhere(stored(toy_run)[2].world["goal"])[0]
     at = [(goal[1] + 0.5) * 10, (goal[0] + 0.5) * 10]
     for episode in played["episodes"]:
@@ -197,6 +197,10 @@ BAD = [
     ("post", "/api/toy/play", {"z": [0, 0]}, 400, "3 numbers"),
     ("post", "/api/toy/play", {"z": [0, 0, 1e300]}, 400, "±10"),
     ("post", "/api/toy/play", {"z": "0,0,0"}, 422, "z"),
+    ("post", "/api/toy/play", {"world": 0, "agnet": "scripted/random"}, 422, "unknown field 'agnet'"),
+    ("post", "/api/toy/save", {"world": 0, "path": "/tmp/x"}, 422, "unknown field 'path'"),
+    ("post", "/api/toy/play", {"world": 0, "client": "../x"}, 422, "client"),
+    ("get", "/api/toy/ready?episodes=99", None, 422, "episodes"),
 ]
 
 
@@ -212,6 +216,83 @@ def test_a_bad_request_gets_a_one_line_json_error(client, method, path, body, st
 def test_malformed_json_is_refused(client):
     response = client.post("/api/toy/play", content=b"{not json", headers={"content-type": "application/json"})
     assert response.status_code == 422 and "\n" not in response.json()["error"]
+    assert response.json()["error"].startswith("the request body is not valid JSON (")
+
+
+def test_a_large_body_is_refused_before_it_is_read(client):
+    padding = "x" * (10 * 1024 * 1024)
+    response = client.post("/api/toy/play", content=f'{{"world": 0, "note": "{padding}"}}', headers={"content-type": "application/json"})
+    assert response.status_code == 413 and "64 KiB" in response.json()["error"]
+    chunked = client.post("/api/toy/play", content=iter([b'{"world": 0}']), headers={"content-type": "application/json"})
+    assert chunked.status_code == 411
+
+
+def test_the_map_marks_failing_worlds_and_says_what_its_axes_show(client, toy_run):
+    found = client.get("/api/toy/map").json()
+    reached = np.array([np.mean([e["reached"] for e in ev.episodes]) for ev in stored(toy_run)])
+    assert found["failure"] == "reached < 0.5" and found["failing"] == (reached < 0.5).astype(int).tolist()
+    assert 0 < found["explained"][1] <= found["explained"][0] and sum(found["explained"]) <= 1 + 1e-6
+    (env,) = client.get("/api/run").json()["envs"]
+    assert env["thresholds"] == {"reached": {"op": "<", "value": 0.5}}
+    assert env["key"]["marks"] == {"goal": {"shape": "dot", "colour": "#ff00ff", "radius": 23.04, "label": "goal"}}
+
+
+def test_each_failure_shows_its_nearest_passing_worlds_values(client):
+    means = client.get("/api/toy/map").json()["metrics"]["reached"]
+    for row in client.get("/api/toy/failures?limit=500").json()["rows"]:
+        assert row["nearest_metrics"] == {"reached": pytest.approx(means[row["nearest_passing"]], abs=1e-4)} and means[row["nearest_passing"]] >= 0.5
+
+
+def test_a_play_overtaken_while_it_waits_is_not_played(client, session, monkeypatch):
+    """Three plays of one page: the first is playing when the second and third arrive; the second is dropped (409)."""
+    import threading
+    import time
+
+    import worldagent.explore.session as explorer_session
+
+    replay, started, played = explorer_session.replay_marked, threading.Event(), []
+
+    def slow(*args, **kwargs):
+        started.set()
+        time.sleep(0.6)
+        played.append(1)
+        return replay(*args, **kwargs)
+
+    monkeypatch.setattr(explorer_session, "replay_marked", slow)
+    answers: dict[int, int] = {}
+
+    def post(seq: int) -> None:
+        body = {"world": 3, "agent": "scripted/homing", "episodes": 2, "client": "page-1", "seq": seq}
+        answers[seq] = client.post("/api/toy/play", json=body).status_code
+
+    first = threading.Thread(target=post, args=(1,))
+    first.start()
+    assert started.wait(30)
+    second = threading.Thread(target=post, args=(2,))
+    second.start()
+    time.sleep(0.1)  # the second waits for the lock when the third comes
+    post(3)
+    first.join()
+    second.join()
+    assert answers == {1: 200, 2: 409, 3: 200} and len(played) == 2
+    other = client.post("/api/toy/play", json={"world": 3, "agent": "scripted/homing", "episodes": 2, "client": "page-2", "seq": 1})
+    assert other.status_code == 200  # another page's numbering is its own
+
+
+def test_episodes_are_the_same_whatever_batch_they_are_played_in(session):
+    """1-8 episodes replay as a batch of 8 (one compile): the first n are those a batch of n plays."""
+    from worldagent.evaluation.trajectories import replay
+
+    env = session.env("toy")
+    world = env.stored_world(4)
+    played = env.play(world, "scripted/random", 3, 7, 64)
+    setup = env.setup("scripted/random")
+    import jax
+
+    alone = replay(env.spec, setup.env, setup.policy, world, jax.random.split(jax.random.key(7), 3), setup.params)
+    assert [e["steps"] for e in played["episodes"]] == alone.steps.tolist()
+    assert env.cold(["scripted/random", "nobody"], 3) == {"cold": [], "warming": None}  # compiled for 1-8 episodes; unknown labels ignored
+    assert env.cold(["scripted/random"], 12)["cold"] == ["scripted/random"]  # 9-16 episodes: the second batch size, not yet compiled
 
 
 def test_a_token_guards_every_request(session):

@@ -3,7 +3,10 @@
 Loads the page with no console errors, opens a world from the map, moves a latent slider and
 sees the world redraw, presses play and sees the animation advance, opens a world from an atlas
 cell and from the failures table, exports a world that loads back as a ``WorldDataset``, and
-reopens a latent with its agent from the page's link in a fresh page.
+reopens a latent with its agent from the page's link in a fresh page. Every view names what it
+shows in text (axes, colour bars, legends); a world opened after a play shows none of the earlier
+world's numbers, even when that play answers late; quick slider moves end in the latest world's
+picture and episodes within twice one play's time (plays slowed to ``PLAY_DELAY`` s each).
 
 By default it runs over the toy run of ``conftest.py``. ``WORLDAGENT_EXPLORER_RUN=runs/quick``
 (and ``WORLDAGENT_EXPLORER_ENV=racing``) runs it over a real run instead;
@@ -34,7 +37,8 @@ CHROMIUM_ARGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
-WAIT_MS = 120_000  # a real run's first play compiles its agent
+WAIT_MS = int(os.environ.get("WORLDAGENT_EXPLORER_WAIT_MS", 120_000))  # a real run's first play compiles its agent
+PLAY_DELAY = 1.0  # s added to every play by ``slow_plays``: a busy machine's harvest play
 
 
 def free_port() -> int:
@@ -238,3 +242,129 @@ def test_a_failure_opens_and_exports(page, browser, tmp_path):
     assert reopened.input_value("#agent") == agent and "G(z)" in reopened.text_content("#world-title")
     assert reopened.input_value("#sliders input >> nth=0") == "0.5"
     reopened.close()
+
+
+@pytest.fixture
+def slow_plays(monkeypatch):
+    """Every play's replay takes ``PLAY_DELAY`` s longer (the server runs in this process); yields when each replay ran."""
+    import worldagent.explore.session as explorer_session
+
+    ran: list[float] = []
+    replay = explorer_session.replay_marked
+
+    def slow(*args, **kwargs):
+        time.sleep(PLAY_DELAY)
+        ran.append(time.monotonic())
+        return replay(*args, **kwargs)
+
+    monkeypatch.setattr(explorer_session, "replay_marked", slow)
+    return ran
+
+
+def open_world(page, index: int) -> None:
+    page.evaluate(f"explorer.openWorld({index})")
+    page.wait_for_function(f"document.querySelector('#world-title').textContent.startsWith('world {index} ')", timeout=WAIT_MS)
+    page.wait_for_selector("#world-img[data-loaded='1']", timeout=WAIT_MS)
+
+
+PLAYED = "explorer.state.players[0] !== null && document.querySelector('#metrics-1').rows.length > 1"
+
+
+def test_a_world_opened_after_a_play_shows_none_of_its_numbers(page, slow_plays):
+    agents = page.eval_on_selector_all("#agent option", "options => options.map(o => o.value)")
+    open_world(page, 0)
+    page.select_option("#agent2", agents[-1])
+    page.click("#play")
+    page.wait_for_function(PLAYED, timeout=WAIT_MS)
+    assert page.text_content("#frames") != "0"
+    page.click("#play")  # a second play of world 0, still running when world 1 opens
+    page.wait_for_function(
+        "document.querySelector('#status').textContent.includes('playing') || document.querySelector('#status').textContent.includes('compiling')"
+    )
+    open_world(page, 1)
+    page.wait_for_timeout(int(2.5 * PLAY_DELAY * 1000))  # both of its answers have come back by now
+    assert page.evaluate("explorer.state.players") == [None, None]
+    assert page.evaluate("[...document.querySelectorAll('#metrics-1 tr, #metrics-2 tr, #play-legend .row')].length") == 0
+    assert page.text_content("#frame") == page.text_content("#frames") == "0"
+    assert page.evaluate("explorer.state.stats.dropped") >= 1
+    page.click("#play")
+    page.wait_for_function(PLAYED, timeout=WAIT_MS)
+    assert page.evaluate("explorer.state.players[0].world") == 1  # what is shown is world 1's
+
+
+def test_quick_slider_moves_end_in_the_latest_world_within_twice_one_play(page, slow_plays):
+    open_world(page, 0)
+    started = time.monotonic()
+    page.click("#play")
+    page.wait_for_function(PLAYED, timeout=WAIT_MS)
+    one_play = time.monotonic() - started
+    replays = len(slow_plays)
+    slider = page.locator("#sliders input").first
+    before = float(slider.input_value())
+    slider.focus()
+    for _ in range(8):  # each move is its own world; the first replays while the others come
+        page.keyboard.press("ArrowRight")
+        page.wait_for_timeout(100)
+    moved = time.monotonic()
+    latest = (
+        "(() => { const r = explorer.state.players[0], img = document.querySelector('#world-img');"
+        " return r !== null && JSON.stringify(r.z) === JSON.stringify(explorer.state.z)"
+        " && img.dataset.loaded === '1' && (img.dataset.src || '').includes('/decode.png?z=' + explorer.state.z.map(v => v.toFixed(3)).join(',')); })()"
+    )
+    try:
+        page.wait_for_function(latest, timeout=max(WAIT_MS, 20_000))
+    except Exception:  # playwright's TimeoutError
+        pytest.fail("the page never showed the latest world's episodes: a stale play answered last")
+    took = time.monotonic() - moved
+    assert took <= 2 * one_play, f"the latest world's episodes after {took:.2f} s; one play takes {one_play:.2f} s"
+    assert len(slow_plays) - replays <= 2  # superseded plays were never replayed
+    assert float(slider.input_value()) - before == pytest.approx(8 * 0.05, abs=0.051)  # every move landed (the slider snaps to its 0.05 steps)
+
+
+def text(page, selector: str) -> str:
+    return page.text_content(selector) or ""
+
+
+def test_every_view_names_what_it_shows(page):
+    info = page.evaluate("explorer.state.run.envs.find(e => e.name === explorer.state.env)")
+    metric = page.evaluate("explorer.state.metric")
+    assert "principal axis 1" in text(page, "#map-xlabel") and "principal axis 2" in text(page, "#map-ylabel")
+    assert page.locator("#map-xticks span").count() >= 2 and page.locator("#map-yticks span").count() >= 2
+    colourbar = text(page, "#map-colourbar")
+    assert metric in colourbar and "scale" in colourbar
+    campaigns = page.evaluate("explorer.state.map.campaigns")
+    assert all(name in text(page, "#map-campaigns") for name in campaigns)
+    if info["failure"]:
+        assert "fails" in text(page, "#map-failing-legend")
+    page.select_option("#map-scale", "linear")
+    assert page.get_attribute("#map-canvas", "data-scale") == "linear" and "linear" in text(page, "#map-colourbar")
+
+    open_world(page, 0)
+    legend = text(page, "#world-legend")
+    key = info["key"]
+    assert all(label in legend for label in key["colours"].values())
+    assert all(style["label"] in legend for style in key["marks"].values())
+    assert all(style["label"] in legend for style in key["outcomes"].values())
+    assert all(name in legend for name in key["agents"])
+    page.click("#play")
+    page.wait_for_function(PLAYED, timeout=WAIT_MS)
+    assert "episodes" in text(page, "#play-legend")
+
+    if info["atlases"]:
+        page.click("button[data-view='atlas']")
+        page.wait_for_function("Number(document.querySelector('#atlas-canvas').dataset.cells) > 0", timeout=WAIT_MS)
+        atlas = page.evaluate("explorer.state.atlas")
+        assert atlas["descriptors"][0] in text(page, "#atlas-xlabel") and page.locator("#atlas-xticks span").count() >= 2
+        assert atlas["metric"] in text(page, "#atlas-colourbar") and "worst" in text(page, "#atlas-colourbar")
+        box = page.locator("#atlas-canvas").bounding_box()
+        cell, (cols, rows) = atlas["cells"][0], atlas["size"]
+        page.mouse.move(box["x"] + (cell["x"] + 0.5) * box["width"] / cols, box["y"] + (rows - cell["y"] - 0.5) * box["height"] / rows)
+        page.wait_for_selector("#atlas-hover:not([hidden])")
+        assert f"world {cell['world']}" in text(page, "#atlas-hover-text")
+
+    if info["failure"]:
+        page.click("button[data-view='failures']")
+        page.wait_for_selector("#failures-table img", timeout=WAIT_MS)
+        head = text(page, "#failures-table tr")
+        assert "severity" in head and "there" in head  # each failing world's metrics, and its nearest passing world's
+        assert "Severity:" in text(page, "#failures-help")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+
 from typer.testing import CliRunner
 
 from worldagent.cli import app
@@ -25,6 +27,8 @@ def test_a_non_local_host_gets_a_token(monkeypatch, session):
     server.serve(session, host="0.0.0.0", port=9000, echo=lines.append)
     assert served == {"host": "0.0.0.0", "port": 9000}
     assert "?token=" in lines[0] and len(lines[0].split("?token=")[1].split()[0]) >= 20
+    assert f"http://{socket.gethostname()}:9000/?token=" in lines[0] and "0.0.0.0" not in lines[0]  # an address others can open
+    assert "every address" in lines[1]
     lines.clear()
     server.serve(session, echo=lines.append)
     assert lines[0].startswith("worldagent explore: http://127.0.0.1:8765/ ")  # local: no token needed
@@ -55,3 +59,14 @@ def test_parts_are_checked(toy_run, tmp_path):
         app, ["explore", "--store", str(toy_run / "toy" / "store.sqlite"), "--generator", str(toy_run / "toy" / "generator"), "--env", "racing"]
     )
     assert other.exit_code == 2 and "not racing worlds" in other.output
+
+
+def test_warm_up_compiles_every_agent_in_the_background_while_serving(toy_spec, toy_run):
+    from worldagent.commands.explore import warm_in_background
+    from worldagent.explore.session import Session
+
+    session = Session.open(toy_run)
+    env = session.env("toy")
+    assert env.cold(list(env.agents), 8)["cold"] == list(env.agents)
+    warm_in_background(session).join(timeout=120)
+    assert env.cold(list(env.agents), 8) == {"cold": [], "warming": None}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import typer
@@ -64,7 +65,11 @@ def register(app: typer.Typer) -> None:
         host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on. Any other than 127.0.0.1 requires a token."),
         port: int = typer.Option(8765, "--port", help="Port to listen on."),
         token: str = typer.Option("", "--token", help="Token every request must carry (made and printed when --host is not local)."),
-        warm: bool = typer.Option(True, "--warm/--no-warm", help="Compile G(z) and the run's agents before serving (first clicks answer at once)."),
+        warm: bool = typer.Option(
+            True,
+            "--warm/--no-warm",
+            help="Compile G(z) and every agent in the background while serving, the run's agent first (first plays answer at once).",
+        ),
     ) -> None:
         """Serve the map of a run's worlds, worlds decoded and played live, the atlas and the failures, on a local page."""
         from worldagent.explore.server import serve
@@ -73,7 +78,24 @@ def register(app: typer.Typer) -> None:
         check_port(port)
         session = Session.of(open_run(run_dir, store, generator, agent, env))
         if warm:
-            for found in session.envs.values():
-                console.print(f"warming {found.env}: compiling G(z) and the run's agent ...")
-                found.warm_up()
+            warm_in_background(session)
         serve(session, host=host, port=port, token=token or None, echo=console.print)
+
+
+def warm_in_background(session) -> threading.Thread:
+    """Compile G(z) and the agents while the page is already served: each env's first agent (the run's) first,
+    then the others; the page says "compiling AGENT" for a play that waits on it."""
+    import time
+
+    def warm() -> None:
+        started = time.perf_counter()
+        envs = list(session.envs.values())
+        for found in envs:
+            found.warm_up(list(found.agents)[:1], echo=console.print)
+        for found in envs:
+            found.warm_up(echo=console.print)
+        console.print(f"warm: G(z) and {sum(len(e.agents) for e in envs)} agents compiled in {time.perf_counter() - started:.0f} s", highlight=False)
+
+    thread = threading.Thread(target=warm, name="explorer-warm-up", daemon=True)
+    thread.start()
+    return thread

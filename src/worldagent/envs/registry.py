@@ -132,7 +132,15 @@ class Pictures:
             ``trace`` is; positions as ``trace`` records them (``locate`` places them), K fixed
             per kind, ``shown`` the ones there now. None: the agents only.
         mark_styles: ``kind -> {"shape": "dot" | "square" | "ring", "colour": CSS colour,
-            "radius": fraction of the picture's side}``: how the animation draws each kind.
+            "radius": fraction of the picture's side, "label": what it means}``: how the animation
+            draws each kind, and its line in the explorer's legend (default label: the kind).
+        legend: ``CSS colour -> what it means`` on ``world``'s picture (harvest: walls, apples,
+            spawn corners), the explorer's legend beside the picture; empty: none shown.
+        agents: names of the agents ``trace`` records, in its order (the legend of their trails);
+            empty: "agent 1", "agent 2", ... (one agent: each episode has its own colour).
+        outcomes: ``per-episode metric -> style`` (as ``mark_styles``, shape "cross" too): the mark
+            drawn at each agent's last position when the episode's metric is non-zero (racing: a
+            red cross where a crash ended it).
     """
 
     world: Callable[[Any, int], Any]
@@ -141,6 +149,9 @@ class Pictures:
     locate: Callable[[Any, Any, int], Any] | None = None
     marks: Callable[[Any, Any], Mapping[str, tuple[Any, Any]]] | None = None
     mark_styles: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    legend: Mapping[str, str] = field(default_factory=dict)
+    agents: tuple[str, ...] = ()
+    outcomes: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -125,8 +125,9 @@ def episodes_payload(spec, world: Any, played, params: Any, size: int, marks: di
         runs.append(run)
     means = {name: float(np.mean(np.asarray(v, np.float64))) for name, v in metrics.items()}
     still = still_picture(spec, world, played, size) if pixels is None else None
-    styles = {kind: mark_style(spec.pictures.mark_styles.get(kind, {}), size) for kind in marked} or None
-    return {"size": size, "episodes": runs, "means": means, "still": still, "marks": styles}
+    styles = {kind: mark_style(spec.pictures.mark_styles.get(kind, {}), size, kind) for kind in marked} or None
+    outcomes = {name: mark_style(style, size, name) for name, style in spec.pictures.outcomes.items() if name in metrics} if locate else {}
+    return {"size": size, "episodes": runs, "means": means, "still": still, "marks": styles, "outcomes": outcomes or None}
 
 
 def mark_changes(positions, shown, steps, locate) -> list[list]:
@@ -166,12 +167,25 @@ def moved_marks(positions: np.ndarray) -> np.ndarray:
     return (positions[:, 1:] != positions[:, :-1]).any(-1)
 
 
-def mark_style(style, size: int) -> dict:
-    """A kind's ``Pictures.mark_styles`` entry for the page: its radius in picture pixels (at least one)."""
+def mark_style(style, size: int, kind: str = "") -> dict:
+    """A kind's ``Pictures.mark_styles`` (or ``outcomes``) entry for the page: its radius in picture
+    pixels (at least one) and its legend label (default: the kind's name)."""
     return {
         "shape": str(style.get("shape", "dot")),
         "colour": str(style.get("colour", "#ffffff")),
         "radius": round(max(1.0, float(style.get("radius", 0.01)) * size), 2),
+        "label": str(style.get("label", kind)),
+    }
+
+
+def picture_key(pictures, size: int = 384) -> dict:
+    """What the World view's legend names: the picture's colours, each kind of mark, the agents and the
+    outcome marks (``Pictures.legend``, ``mark_styles``, ``agents``, ``outcomes``)."""
+    return {
+        "colours": dict(pictures.legend),
+        "marks": {kind: mark_style(style, size, kind) for kind, style in pictures.mark_styles.items()},
+        "agents": list(pictures.agents),
+        "outcomes": {name: mark_style(style, size, name) for name, style in pictures.outcomes.items()},
     }
 
 

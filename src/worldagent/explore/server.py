@@ -7,7 +7,9 @@ web page elsewhere cannot reach the server through DNS rebinding), and a request
 another site's ``Origin`` is refused always (a page elsewhere cannot make the user's browser
 play or save). Requests are checked
 (latent length, finite and bounded numbers, capped counts, agents and metrics by name from
-the run's own lists): a bad one gets a 4xx with ``{"error": "<one line>"}``. Files come only
+the run's own lists; bodies under ``MAX_BODY`` bytes, unknown fields refused): a bad one gets a 4xx
+with ``{"error": "<one line>"}``. A play carries its page's ``client`` id and ``seq``uence number: one
+that a newer play of the same page overtook while it waited is answered 409 unplayed. Files come only
 from the package's ``static/`` folder; nothing is unpickled; nothing is written to the run
 except the worlds a user saves (``POST /api/ENV/save``: a one-world dataset in ``<run>/ENV/explorer/``).
 
@@ -18,7 +20,8 @@ API (``ENV``: an environment of the run)::
     GET  /api/ENV/world/I                 stored world I: campaign, latent, metrics
     GET  /api/ENV/world/I.png             its picture          (?size=)
     GET  /api/ENV/decode.png?z=a,b,...    the picture of G(z)  (?size=)
-    POST /api/ENV/play                    {"world": I | "z": [...], "agent", "episodes", "seed", "size"}: episodes played now
+    POST /api/ENV/play                    {"world": I | "z": [...], "agent", "episodes", "seed", "size", "client", "seq"}: episodes played now
+    GET  /api/ENV/ready                   which agents' first play would compile (?agents=a,b&episodes=)
     GET  /api/ENV/failures                failing worlds     (?event=, by=likelihood|severity, limit=)
     GET  /api/ENV/atlas                   the atlas heat map (?name=)
     GET  /api/ENV/diff                    a `worldagent diff` campaign's regressed worlds (?campaign=, event=, limit=)
@@ -30,6 +33,9 @@ import hashlib
 import json
 import math
 import secrets
+import socket
+import threading
+from collections import OrderedDict
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
 from urllib.parse import urlsplit
@@ -38,11 +44,11 @@ import numpy as np
 from fastapi import Depends, FastAPI, HTTPException, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from worldagent.errors import WorldagentError
-from worldagent.explore.session import RUN_AGENT, EnvSession, Session
+from worldagent.explore.session import RUN_AGENT, EnvSession, Session, Superseded
 
 STATIC = Path(__file__).parent / "static"
 LATENT_BOUND = 10.0  # |z_i| ≤ 10: the prior puts no mass beyond; larger values only decode the edge world
@@ -53,6 +59,8 @@ SAVED_FOLDER = "explorer"  # <run>/<env>/explorer/: the worlds a user saved (not
 TOKEN_HEADER = "x-worldagent-token"
 TOKEN_COOKIE = "worldagent_token"
 LOOPBACK = ("127.0.0.1", "localhost", "[::1]")
+MAX_BODY = 64 * 1024  # bytes: the largest request the page sends (a 256-number latent) is a few kB
+CLIENTS_KEPT = 1024  # pages whose latest play is remembered
 
 
 def one_line(text: Any) -> str:
@@ -83,8 +91,9 @@ def check_latent(session: EnvSession, z: list[float]) -> np.ndarray:
 
 
 class WorldRequest(BaseModel):
-    """A world to act on: stored world ``world`` or G(``z``), exactly one."""
+    """A world to act on: stored world ``world`` or G(``z``), exactly one; no other fields."""
 
+    model_config = ConfigDict(extra="forbid")
     world: int | None = Field(None, ge=0)
     z: list[float] | None = Field(None, max_length=256)
 
@@ -102,6 +111,30 @@ class PlayRequest(WorldRequest):
     episodes: int = Field(8, ge=1, le=MAX_EPISODES)
     seed: int = Field(0, ge=0, lt=2**31)
     size: int = Field(384, ge=64, le=MAX_SIZE)
+    client: str | None = Field(None, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
+    seq: int = Field(0, ge=0, lt=2**53)
+
+
+class Plays:
+    """The latest play ``seq`` of each page (``client``) and environment: an older play still waiting is superseded."""
+
+    def __init__(self) -> None:
+        self.latest: OrderedDict = OrderedDict()
+        self.lock = threading.Lock()
+
+    def arrived(self, env: str, client: str | None, seq: int) -> None:
+        if client is None:
+            return
+        with self.lock:
+            key = (env, client)
+            self.latest[key] = max(seq, self.latest.get(key, seq))
+            self.latest.move_to_end(key)
+            while len(self.latest) > CLIENTS_KEPT:
+                self.latest.popitem(last=False)
+
+    def superseded(self, env: str, client: str | None, seq: int) -> bool:
+        with self.lock:
+            return client is not None and self.latest.get((env, client), seq) > seq
 
 
 Size = Annotated[int, Query(ge=32, le=MAX_SIZE)]
@@ -185,6 +218,10 @@ def add_views(app: FastAPI, session: Session, Env: Any) -> None:
     ) -> dict:
         return env.failures(event, by, limit)
 
+    @app.get("/api/{env}/ready")
+    def ready(env: Env, agents: Annotated[str, Query(max_length=2000)] = "", episodes: Annotated[int, Query(ge=1, le=MAX_EPISODES)] = 8) -> dict:
+        return env.cold([a for a in agents.split(",") if a], episodes)
+
     @app.get("/api/{env}/atlas")
     def atlas(env: Env, name: Annotated[str | None, Query(max_length=200)] = None) -> dict:
         return env.atlas(name)
@@ -201,13 +238,18 @@ def add_views(app: FastAPI, session: Session, Env: Any) -> None:
 
 def add_world_actions(app: FastAPI, Env: Any) -> None:
     """Play a world, export it, save it."""
+    plays = Plays()
 
     @app.post("/api/{env}/play")
     def play(env: Env, request: PlayRequest) -> Response:
+        plays.arrived(env.env, request.client, request.seq)
+        superseded = lambda: plays.superseded(env.env, request.client, request.seq)  # noqa: E731
+        if superseded():
+            raise Superseded
         world, _ = resolve(env, request.world, request.z)
-        played = env.play(world, request.agent, request.episodes, request.seed, request.size)
+        played = env.play(world, request.agent, request.episodes, request.seed, request.size, superseded)
         source = {"world": request.world} if request.world is not None else {"z": request.z}
-        return plain_json({**played, **source, "agent": request.agent, "seed": request.seed})
+        return plain_json({**played, **source, "agent": request.agent, "seed": request.seed, "seq": request.seq})
 
     @app.get("/api/{env}/export.npz")
     def export_npz(env: Env, world: WorldIndex = None, z: LatentText = None) -> Response:
@@ -274,11 +316,13 @@ def install_errors(app: FastAPI) -> None:
     async def refused(request: Request, exc: WorldagentError) -> JSONResponse:
         return error(400, str(exc))
 
+    @app.exception_handler(Superseded)
+    async def superseded(request: Request, exc: Superseded) -> JSONResponse:
+        return error(409, "superseded: a newer play from this page replaced this one before it started.")
+
     @app.exception_handler(RequestValidationError)
     async def malformed(request: Request, exc: RequestValidationError) -> JSONResponse:
-        first = exc.errors()[0] if exc.errors() else {}
-        where = ".".join(str(part) for part in first.get("loc", ()) if part != "body")
-        return error(422, f"{where}: {first.get('msg', 'invalid request')}" if where else first.get("msg", "invalid request"))
+        return error(422, validation_message(exc.errors()[0] if exc.errors() else {}))
 
     @app.exception_handler(Exception)
     async def crashed(request: Request, exc: Exception) -> JSONResponse:
@@ -287,6 +331,33 @@ def install_errors(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         return error(exc.status_code, exc.detail if isinstance(exc.detail, str) else "request refused")
+
+
+def validation_message(first: dict) -> str:
+    """One line for pydantic's first complaint: invalid JSON and unknown fields said plainly, else ``field: message``."""
+    kind = first.get("type")
+    where = ".".join(str(part) for part in first.get("loc", ()) if part != "body")
+    if kind == "json_invalid":
+        reason = (first.get("ctx") or {}).get("error", "not JSON")
+        return f'the request body is not valid JSON ({reason} at character {where or 0}); send a JSON object, e.g. {{"world": 0}}.'
+    if kind == "extra_forbidden":
+        return f"unknown field {where!r}; send only the fields this request takes."
+    message = first.get("msg", "invalid request")
+    return f"{where}: {message}" if where else message
+
+
+def body_refusal(request: Request) -> JSONResponse | None:
+    """413 for a body over ``MAX_BODY`` bytes, 411 for one of unknown length (chunked): checked before it is read."""
+    if request.method not in ("POST", "PUT", "PATCH"):
+        return None
+    length = request.headers.get("content-length")
+    if length is None:
+        if request.headers.get("transfer-encoding"):
+            return error(411, "send the request body with a Content-Length header.")
+        return None
+    if not length.isdigit() or int(length) > MAX_BODY:
+        return error(413, f"request body of {length} bytes refused; the explorer's requests are under {MAX_BODY // 1024} KiB.")
+    return None
 
 
 def install_guard(app: FastAPI, token: str | None) -> None:
@@ -298,6 +369,9 @@ def install_guard(app: FastAPI, token: str | None) -> None:
         origin = request.headers.get("origin")
         if origin and urlsplit(origin).netloc != request.headers.get("host"):  # another site's page, in the user's browser
             return error(403, f"cross-origin request from {origin!r} refused; open the explorer's own page.")
+        refused = body_refusal(request)
+        if refused is not None:
+            return refused
         if token is None:
             host = host_name(request.headers.get("host", ""))
             if host not in LOOPBACK:
@@ -324,6 +398,17 @@ def serve(session: Session, host: str = "127.0.0.1", port: int = 8765, token: st
     if host not in ("127.0.0.1", "localhost", "::1") and not token:
         token = secrets.token_urlsafe(18)
     app = make_app(session, token)
-    shown = f"[{host}]" if ":" in host else host
-    echo(f"worldagent explore: http://{shown}:{port}/" + (f"?token={token}" if token else "") + "  (Ctrl-C stops it)")
+    echo(f"worldagent explore: {page_url(host, port, token)}  (Ctrl-C stops it)")
+    if host in WILDCARD:
+        echo(f"listening on every address of this machine ({host}): others open it by this machine's name or address, with the token.")
     uvicorn.run(app, host=host, port=port, log_level="warning")
+
+
+WILDCARD = ("0.0.0.0", "::", "")
+
+
+def page_url(host: str, port: int, token: str | None) -> str:
+    """The URL to print: a wildcard address (0.0.0.0, ::) is no address a browser can open, so the machine's name."""
+    name = socket.gethostname() if host in WILDCARD else host
+    shown = f"[{name}]" if ":" in name else name
+    return f"http://{shown}:{port}/" + (f"?token={token}" if token else "")

@@ -4,7 +4,9 @@
 (without worlds; a world is read from the store when asked for), their latents, projection and
 metric means. Generators and agents load on first use and stay loaded; every JAX call of an
 environment holds that environment's lock, so concurrent requests never compile one program
-twice. Agents are chosen by label from ``EnvSession.agents``, a fixed list built here (the run's
+twice. A play superseded by a newer one from the same page while it waited for that lock is
+dropped unplayed (``Superseded``). Episodes are played in batches of ``EPISODE_BUCKETS`` (the
+first ``episodes`` kept), so each agent compiles at most twice. Agents are chosen by label from ``EnvSession.agents``, a fixed list built here (the run's
 agent, the influence phase's agents, the env's scripted ones): a request never names a path.
 """
 
@@ -13,6 +15,7 @@ from __future__ import annotations
 import io
 import threading
 from collections import Counter, OrderedDict
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +27,7 @@ from worldagent.errors import WorldagentError
 from worldagent.events import parse_selection
 from worldagent.explore import views
 from worldagent.explore.diff import diff_agents, diff_campaigns, diff_view
-from worldagent.explore.episodes import episodes_payload, replay_marked
+from worldagent.explore.episodes import episodes_payload, picture_key, replay_marked
 from worldagent.runs import Run
 
 RUN_AGENT = "run"  # the label of the run's own trained agent
@@ -33,6 +36,18 @@ PICTURE_CACHE = 2048  # stored worlds' PNGs kept (a 160 px picture is a few kB)
 # product with the dataset ~12x slower for one row than for two (racing quick: 390 ms against 33 ms).
 DECODE_ROWS = 2
 SAME_LATENT = 1e-9  # latents closer than this are one world (scored again by another campaign), never its own neighbour
+# A play's episodes are replayed in one of these batch sizes (the first ones kept): the replay compiles per
+# batch size and agent, so 1-16 episodes cost at most two compiles an agent instead of sixteen.
+EPISODE_BUCKETS = (8, 16)
+
+
+class Superseded(Exception):
+    """A play that a newer one from the same page replaced before it started: not played."""
+
+
+def episode_bucket(episodes: int) -> int:
+    """The batch size ``episodes`` episodes are replayed in (``EPISODE_BUCKETS``; larger counts as asked)."""
+    return next((b for b in EPISODE_BUCKETS if b >= episodes), int(episodes))
 
 
 def agent_sources(run: Run, env: str) -> dict[str, str]:
@@ -73,6 +88,8 @@ class EnvSession:
     means: dict[str, np.ndarray]
     agents: dict[str, str]
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    ready: set = field(default_factory=set, repr=False)  # (agent, batch size) compiled: its plays answer at once
+    warming: str | None = None  # the agent the warm-up is compiling now
     cache_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     pictures: OrderedDict = field(default_factory=OrderedDict, repr=False)
     _loaded: dict = field(default_factory=dict, repr=False)
@@ -110,6 +127,8 @@ class EnvSession:
             "agents": list(self.agents),
             "has_generator": self.run.has_generator(self.env),
             "animates": spec.pictures.locate is not None,
+            "thresholds": views.thresholds(parse_selection(spec.failure, self.env), list(self.means)) if spec.failure else {},
+            "key": picture_key(spec.pictures),
             "atlases": self.atlas_names(),
             "diffs": list(diff_campaigns(self.run, self.env)),
         }
@@ -151,8 +170,11 @@ class EnvSession:
     # -- the map, the failures, the atlas ---------------------------------------------------------
 
     def map_data(self) -> dict:
+        """Every stored world's place, campaign and metric means; which fail the env's failure event; the
+        projection (its axes and the share of variance each shows)."""
         campaigns = list(dict.fromkeys(e.campaign for e in self.evaluations))
         order = {name: i for i, name in enumerate(campaigns)}
+        failure = self.failing(None, required=False)
         return {
             "x": rounded(self.xy[:, 0]),
             "y": rounded(self.xy[:, 1]),
@@ -161,18 +183,30 @@ class EnvSession:
             "metrics": {name: rounded(values) for name, values in self.means.items()},
             "axes": rounded(self.projection.axes),
             "centre": rounded(self.projection.centre),
+            "explained": rounded(self.projection.explained),
+            "failure": failure[0].describe() if failure else None,
+            "failing": failure[1].astype(int).tolist() if failure else None,
         }
 
-    def failures(self, event: str | None, by: str, limit: int) -> dict:
-        """The failing stored worlds ranked ``by`` likelihood or severity, each with its nearest passing world."""
+    def failing(self, event: str | None, required: bool = True):
+        """(selection, bool[n] which stored worlds it selects) of ``event`` (default: the env's failure);
+        None when there is no event or (not ``required``) the stored worlds lack its metrics."""
         text = event or self.spec.failure
         if not text:
+            if not required:
+                return None
             raise WorldagentError(f"{self.env} names no failure event; pass one, e.g. event={next(iter(self.means), 'metric')} < 0.")
         selection = parse_selection(text, self.env)
         missing = [m for m in selection.metrics if m not in self.means]
         if missing:
+            if not required:
+                return None
             raise WorldagentError(f"the stored worlds have no per-episode {missing[0]!r}; use one of: {', '.join(self.means)}.")
-        failing = selection.mask(self.evaluations) if self.evaluations else np.zeros(0, bool)
+        return selection, selection.mask(self.evaluations) if self.evaluations else np.zeros(0, bool)
+
+    def failures(self, event: str | None, by: str, limit: int) -> dict:
+        """The failing stored worlds ranked ``by`` likelihood or severity, each with its nearest passing world."""
+        selection, failing = self.failing(event)
         severity = views.severity(selection, self.means)
         ranked, repeats = views.distinct_latents(self.latents, views.rank_failures(self.latents, failing, severity, by))
         ranked, repeats = ranked[:limit], repeats[:limit]
@@ -188,6 +222,7 @@ class EnvSession:
                 "metrics": {name: finite_or_none(self.means[name][i]) for name in selection.metrics},
                 "evaluations": int(repeats[k]),
                 "nearest_passing": int(passing[near[k]]) if near[k] >= 0 else None,
+                "nearest_metrics": {name: finite_or_none(self.means[name][passing[near[k]]]) for name in selection.metrics} if near[k] >= 0 else None,
                 "distance": finite_or_none(distance[k]),
             }
             for k, i in enumerate(ranked)
@@ -308,23 +343,59 @@ class EnvSession:
             self._loaded[key] = experiments.setup(self.env, self.agents[agent], self.generator()[0], options=None)
         return self._loaded[key]
 
-    def warm_up(self, episodes: int = 8) -> None:
-        """Compile G(z) and the default agent's episodes once (what the first click would wait for)."""
-        if not self.describe()["has_generator"]:
+    def warm_up(self, agents: Sequence[str] | None = None, episodes: int = EPISODE_BUCKETS[0], echo: Callable[[str], None] | None = None) -> None:
+        """Compile G(z) and each of ``agents``' plays once (default: every agent, the run's first), what
+        their first click would wait for. An agent that cannot load is skipped with one line to ``echo``."""
+        if not self.run.has_generator(self.env):
             return
         world = self.decode(np.zeros(self.latent_dim))
-        if self.agents:
-            self.play(world, next(iter(self.agents)), episodes, 0, 64)
+        for agent in self.agents if agents is None else agents:
+            if (agent, episode_bucket(episodes)) in self.ready:
+                continue
+            self.warming = agent
+            try:
+                self.play(world, agent, episodes, 0, 64)
+            except Exception as error:  # noqa: BLE001  a broken agent must not stop the others' warm-up
+                if echo:
+                    echo(f"warming {self.env}: {agent} did not load ({' '.join(str(error).split())})")
+            finally:
+                self.warming = None
 
-    def play(self, world: Any, agent: str, episodes: int, seed: int, size: int) -> dict:
-        """Play ``episodes`` episodes of ``agent`` on ``world`` now; where the agents went, as pixels on its picture, and the env's marks."""
+    def cold(self, agents: Sequence[str], episodes: int) -> dict:
+        """Which of ``agents`` (known labels only) would compile before playing ``episodes`` episodes, and
+        what the warm-up compiles now: what the page says while a first play waits."""
+        bucket = episode_bucket(episodes)
+        return {"cold": [a for a in agents if a in self.agents and (a, bucket) not in self.ready], "warming": self.warming}
+
+    def play(self, world: Any, agent: str, episodes: int, seed: int, size: int, superseded: Callable[[], bool] = lambda: False) -> dict:
+        """Play ``episodes`` episodes of ``agent`` on ``world`` now; where the agents went, as pixels on its picture, and the env's marks.
+
+        ``superseded()`` is asked once this play holds the environment's lock: True (a newer play from the
+        same page arrived meanwhile) drops it unplayed with ``Superseded``.
+        """
         import jax
 
+        bucket = episode_bucket(episodes)
         with self.lock:
+            if superseded():
+                raise Superseded
             setup = self.setup(agent)
             keys = jax.random.split(jax.random.key(int(seed)), int(episodes))
-            played, marks = replay_marked(self.spec, setup.env, setup.policy, world, keys, setup.params)
+            padded = keys[np.minimum(np.arange(bucket), episodes - 1)]  # the same keys as before, the last repeated
+            played, marks = replay_marked(self.spec, setup.env, setup.policy, world, padded, setup.params)
+            self.ready.add((agent, bucket))
+        played, marks = first_episodes(played, marks, int(episodes))
         return episodes_payload(self.spec, world, played, setup.params, size, marks)
+
+
+def first_episodes(played, marks: dict, count: int):
+    """The first ``count`` of replayed episodes and their marks (``replay_marked``'s outputs)."""
+    from worldagent.evaluation.trajectories import Episodes
+
+    if len(played) == count:
+        return played, marks
+    cut = Episodes(played.positions[:count], played.present[:count], played.steps[:count], {k: v[:count] for k, v in played.metrics.items()})
+    return cut, {kind: (where[:count], shown[:count]) for kind, (where, shown) in marks.items()}
 
 
 def run_latent_dim(run: Run, env: str, evaluations: list) -> int:

@@ -8,7 +8,7 @@ world, and the atlas's grid of cells. ``session.py`` feeds them what ``runs.Run`
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -22,10 +22,12 @@ class Projection:
     Attributes:
         centre: f64[d] the stored latents' mean.
         axes: f64[2, d] unit directions; a latent z lands at ``(z - centre) @ axes.T``.
+        explained: f64[2] the share of the latents' variance along each axis (what the map's axis labels say).
     """
 
     centre: np.ndarray
     axes: np.ndarray
+    explained: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
 
     def __call__(self, latents: np.ndarray) -> np.ndarray:
         return (np.asarray(latents, np.float64) - self.centre) @ self.axes.T
@@ -38,14 +40,17 @@ def principal_projection(latents: np.ndarray) -> Projection:
     centre = latents.mean(axis=0)
     if len(latents) < 2:
         return Projection(centre, np.eye(2, dim))
-    _, _, rows = np.linalg.svd(latents - centre, full_matrices=False)
+    _, singular, rows = np.linalg.svd(latents - centre, full_matrices=False)
+    variance = singular**2
+    explained = np.zeros(2)
+    explained[: min(2, len(variance))] = variance[:2] / variance.sum() if variance.sum() > 0 else 0.0
     axes = np.zeros((2, dim))
     axes[: min(2, len(rows))] = rows[:2]
     for i in range(2):
         if not axes[i].any():  # one latent dimension only, or all latents on a line
             axes[i, i % dim] = 1.0
         axes[i] *= np.sign(axes[i][np.argmax(np.abs(axes[i]))])
-    return Projection(centre, axes)
+    return Projection(centre, axes, explained)
 
 
 def scalar_metrics(evaluations: Sequence, names: Sequence[str]) -> list[str]:
@@ -82,6 +87,17 @@ def severity(selection: Selection, means: dict[str, np.ndarray]) -> np.ndarray:
         elif clause.op in (">", ">="):
             total += values - clause.number
     return total
+
+
+def thresholds(selection: Selection, names: Sequence[str]) -> dict[str, dict]:
+    """{metric: {"op", "value"}} of the selection's one-sided clauses on ``names``: where a map's diverging
+    colour scale turns from passing to failing."""
+    found = {}
+    for clause in selection.clauses:
+        metric = clause.metric or clause.name
+        if metric in names and clause.op in ("<", "<=", ">", ">="):
+            found.setdefault(metric, {"op": clause.op, "value": float(clause.number)})
+    return found
 
 
 def nearest(latents: np.ndarray, candidates: np.ndarray, beyond: float = -1.0) -> tuple[np.ndarray, np.ndarray]:

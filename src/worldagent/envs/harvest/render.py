@@ -28,6 +28,21 @@ REACH = (20, 30, 70)  # dark blue: where the tagger can go
 AGENT_COLOURS = ((0.95, 0.25, 0.25), (0.25, 0.55, 1.0), (1.0, 0.65, 0.1), (0.85, 0.35, 0.95))  # TL, TR, BL, BR (trajectories)
 
 
+def hex_colour(rgb: tuple[int, int, int]) -> str:
+    return "#" + "".join(f"{v:02x}" for v in rgb)
+
+
+# What each colour of ``draw_map(..., agents=True, reach=True)`` means (the explorer's legend of the world picture).
+LEGEND = {
+    hex_colour(WALL): "wall",
+    hex_colour(APPLE): "apple at the start",
+    hex_colour(BACKGROUND): "floor",
+    hex_colour(REACH): "floor agent 0 can walk to (walls that shut it in show)",
+    hex_colour(OBSERVER): "agent 0's spawn corner (top left; the tagger when one is set)",
+    hex_colour(AGENT): "the other agents' spawn corners",
+}
+
+
 def draw_grid(walls: np.ndarray, apples: np.ndarray, cell: int = 16) -> Image.Image:
     """An RGB image of walls and apples (bool[H, W] each), ``cell`` pixels per cell."""
     rgb = np.zeros(walls.shape + (3,), np.uint8)

@@ -6,6 +6,7 @@ import numpy as np
 
 from worldagent.envs.harvest.env import BEAM_LENGTH, NUM_AGENTS, VIEW_BEHIND, VIEW_SIZE
 from worldagent.envs.harvest.open_repair import OpenRooms
+from worldagent.envs.harvest.render import LEGEND
 from worldagent.envs.harvest.repair import HarvestRepair, threshold_maps
 from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
@@ -175,10 +176,11 @@ def marks(env, state):
 
 CELL = 1 / DEFAULT_SIZE  # one cell, as a fraction of the picture's side
 MARK_STYLES = {
-    "apple": {"shape": "dot", "colour": "#5dff7a", "radius": 0.22 * CELL},
-    "beam": {"shape": "square", "colour": "#ffe14d", "radius": 0.45 * CELL},
-    "tagged": {"shape": "ring", "colour": "#b4b4b4", "radius": 0.38 * CELL},
+    "apple": {"shape": "dot", "colour": "#5dff7a", "radius": 0.22 * CELL, "label": "apple (eaten ones vanish, regrown ones return)"},
+    "beam": {"shape": "square", "colour": "#ffe14d", "radius": 0.45 * CELL, "label": "TAG beam, at the step it is fired"},
+    "tagged": {"shape": "ring", "colour": "#b4b4b4", "radius": 0.38 * CELL, "label": "where a tagged-out agent was hit (until it respawns)"},
 }
+AGENT_NAMES = ("agent 0 (top left; the tagger when one is set)", "agent 1 (top right)", "agent 2 (bottom left)", "agent 3 (bottom right)")
 
 
 def world_picture(world, size: int):
@@ -263,7 +265,16 @@ SPEC = register(
             default_descriptors=("wall_share", "apple_clustering"),
         ),
         trace=trace,
-        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate, marks=marks, mark_styles=MARK_STYLES),
+        pictures=Pictures(
+            world=world_picture,
+            episodes=draw_episodes,
+            sheet=sheet,
+            locate=locate,
+            marks=marks,
+            mark_styles=MARK_STYLES,
+            legend=LEGEND,
+            agents=AGENT_NAMES,
+        ),
         scripted={"random": uniform, "greedy": greedy},
         algorithms=("dqn",),
         presets={

@@ -25,6 +25,14 @@ CRASH = (220, 40, 40)
 SUPERSAMPLE = 2
 
 
+def hex_colour(rgb: tuple[int, int, int]) -> str:
+    return "#" + "".join(f"{v:02x}" for v in rgb)
+
+
+# What each colour of ``draw_track`` means (the explorer's legend of the world picture).
+LEGEND = {hex_colour(ROAD): "road", hex_colour(GRASS): "grass (off the road: a crash)", hex_colour(START_LINE): "start line"}
+
+
 VIEW_EXTENT = 0.9  # pictures show the square [-0.9, 0.9]²: every generated track fits in it
 
 

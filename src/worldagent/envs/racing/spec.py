@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from worldagent.envs.racing.open_repair import OpenTracks
+from worldagent.envs.racing.render import LEGEND
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
 from worldagent.envs.repairs import NearestWorld
 
@@ -161,6 +162,10 @@ def world_picture(world, size: int):
     return track_image(world, size=size)
 
 
+# A crash ends an evaluation episode: the explorer marks where, as the strategic figure does.
+OUTCOMES = {"crashed": {"shape": "cross", "colour": "#ff1a1a", "radius": 0.022, "label": "crash: the episode ended off the road"}}
+
+
 def locate(positions, world, size: int):
     """Pixel (x, y) of normalised positions on ``world_picture`` (it always shows the same square)."""
     from worldagent.envs.racing.render import _xy_to_canvas
@@ -252,7 +257,9 @@ SPEC = register(
             default_descriptors=("total_curvature", "sharpest_corner"),
         ),
         trace=trace,
-        pictures=Pictures(world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate),
+        pictures=Pictures(
+            world=world_picture, episodes=draw_episodes, sheet=sheet, locate=locate, legend=LEGEND, agents=("the particle",), outcomes=OUTCOMES
+        ),
         scripted={"driver": driver, "random": uniform},
         algorithms=("ppo", "acktr"),
         algorithm_overrides=TRAINING_SETTINGS,

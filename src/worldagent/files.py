@@ -53,12 +53,17 @@ def can_create_files_in(folder: Path) -> bool:
 
 
 def write_atomically(path: Path | str, save: Callable[[Path], None]) -> Path:
-    """Call ``save(tmp)`` to write a temp file, then rename it to ``path`` (parents created)."""
+    """Call ``save(tmp)`` to write a temp file, then rename it to ``path`` (parents created). A save that
+    fails (a full disk, an interrupt) leaves neither ``path`` changed nor its temp file behind."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    save(tmp)
-    tmp.replace(path)
+    try:
+        save(tmp)
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 

@@ -36,6 +36,7 @@ from worldagent.files import can_create_files_in
 
 SCHEMA_VERSION = 1
 STORE_FILE = "store.sqlite"
+BUSY_SECONDS = 30.0  # how long a write waits for another process's before "database is locked" (a one-line error at the CLI)
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -130,8 +131,8 @@ class RunStore:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
         try:
-            self.db = sqlite3.connect(path, timeout=30.0, isolation_level=None)
-            self.db.execute("PRAGMA busy_timeout=30000")
+            self.db = sqlite3.connect(path, timeout=BUSY_SECONDS, isolation_level=None)
+            self.db.execute(f"PRAGMA busy_timeout={int(BUSY_SECONDS * 1000)}")
             _use_wal(self.db)
             if not self._tables():
                 if not create:
@@ -139,6 +140,8 @@ class RunStore:
                 self._create()
             self._check()
         except sqlite3.DatabaseError as error:
+            if "locked" in str(error):  # another process holds the store: not a broken file
+                raise
             if not (can_create_files_in(path.parent) and os.access(path, os.W_OK)):  # SQLite writes the store and its -wal, -shm beside it
                 raise WorldagentError(
                     f"cannot open {path} ({error}): SQLite writes the store and files beside it in {path.parent}; make both writable or copy the run directory."

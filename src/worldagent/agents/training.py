@@ -75,7 +75,7 @@ def read_curve(path: Path) -> list[dict]:
     if not path.is_file():
         return []
     with open(path, newline="") as handle:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+        return [{k: int(float(v)) if k == "update" else float(v) for k, v in row.items()} for row in csv.DictReader(handle)]  # older files wrote 1.0
 
 
 def _write_curve(path: Path, rows: list[dict]) -> None:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
+import sqlite3
 import warnings
 
 import typer
@@ -33,9 +35,27 @@ def one_line_warnings():
         warnings.formatwarning = previous
 
 
+FULL_DISK = (errno.ENOSPC, errno.EDQUOT)
+
+
+def machine_failure(error: BaseException) -> str | None:
+    """One line naming the fix for a failure of the machine rather than of the input (a run store another
+    process is writing, a full disk), or None for any other error (a bug: its traceback is wanted)."""
+    if isinstance(error, sqlite3.OperationalError) and "locked" in str(error):
+        return (
+            "the run store stayed locked by another process writing to it (another worldagent command on the same --out?); "
+            "wait for it to finish, or pass another --out."
+        )
+    if isinstance(error, OSError) and error.errno in FULL_DISK:
+        where = f" while writing {error.filename}" if error.filename else ""
+        return f"no space left on the device{where}; free some space (or pass an --out on another disk) and run the same command again."
+    return None
+
+
 def friendly_errors(command):
-    """Decorator: report ``WorldagentError`` as one line on stderr and exit with code 2; warnings
-    raised while the command runs are shown as one line each (``one_line_warning``)."""
+    """Decorator: report ``WorldagentError`` (and ``machine_failure``s: a locked store, a full disk) as one
+    line on stderr and exit with code 2; warnings raised while the command runs are shown as one line each
+    (``one_line_warning``)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -44,6 +64,12 @@ def friendly_errors(command):
                 return command(*args, **kwargs)
             except WorldagentError as error:
                 console.print(f"[red]error:[/red] {escape(str(error))}", soft_wrap=True)  # one line, no markup
+                raise typer.Exit(code=2) from None
+            except (sqlite3.OperationalError, OSError) as error:
+                message = machine_failure(error)
+                if message is None:
+                    raise
+                console.print(f"[red]error:[/red] {escape(message)}", soft_wrap=True)
                 raise typer.Exit(code=2) from None
 
     return wrapper

@@ -23,6 +23,15 @@ from worldagent.errors import WorldagentError
 from worldagent.files import check_writable
 
 
+def interrupted(out: Path) -> str:
+    """What an interrupted run left: the driver checkpoints on the way out, and a rerun resumes from it to the same files."""
+    from worldagent.agents.training import CHECKPOINT_FILE
+
+    if (out / CHECKPOINT_FILE).is_file():
+        return f"interrupted: checkpoint saved in {out / CHECKPOINT_FILE}; run the same command again to resume (it ends where an uninterrupted run would)."
+    return f"interrupted before the first checkpoint; run the same command again to start {out} afresh."
+
+
 def register(app: typer.Typer) -> None:
     """Add ``worldagent train``."""
 
@@ -74,10 +83,14 @@ def register(app: typer.Typer) -> None:
         late = late_replay_warning(schedule, config.episodes)
         if late:
             console.print(f"[yellow]{late}[/yellow]")
-        result = run_training(
-            spec, algo, config, schedule, out, seed=seed, options=options, progress=not quiet, resume=resume,
-            distribution_spec=worlds if curriculum == "dr" else f"{worlds}; curriculum {label(schedule)}",
-        )  # fmt: skip
+        try:
+            result = run_training(
+                spec, algo, config, schedule, out, seed=seed, options=options, progress=not quiet, resume=resume,
+                distribution_spec=worlds if curriculum == "dr" else f"{worlds}; curriculum {label(schedule)}",
+            )  # fmt: skip
+        except KeyboardInterrupt:
+            console.print(interrupted(out), highlight=False)
+            raise typer.Exit(code=130) from None
         console.print(f"trained {algo} for {result.episodes:,} episodes ({result.env_steps:,} steps, {result.wall_seconds:.0f} s) -> {out}")
         if (out / "curriculum.png").is_file():
             console.print(f"the curriculum's buffer over training: {out / 'curriculum.png'} (snapshots in {out / 'curriculum'})")

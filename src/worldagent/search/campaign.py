@@ -18,7 +18,7 @@ with an error instead of optimising on it.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -103,6 +103,19 @@ def evaluation_seed(seed: int, generation: int, slot: int) -> int:
     return int(np.random.SeedSequence([seed, generation, slot]).generate_state(1)[0])
 
 
+def check_repeats(name: str, path: Any, evaluations: Iterable[Evaluation], repeats: int | None) -> None:
+    """Refuse to resume a campaign whose worlds were played another number of times (its config does not record
+    it; each stored world's episodes do): mixing both would score old and new worlds differently."""
+    counts = sorted({len(e.episodes) for e in evaluations if e.episodes})
+    if repeats is None or not counts or counts == [int(repeats)]:
+        return
+    had = counts[0] if len(counts) == 1 else " or ".join(map(str, counts))
+    raise WorldagentError(
+        f"campaign {name!r} in {path} played each world {had} times, not --repeats {repeats}; "
+        f"pass --repeats {had} to resume it, or another --out (or --seed) for a new campaign."
+    )
+
+
 def run_campaign(
     store: RunStore,
     spec: CampaignSpec,
@@ -133,6 +146,7 @@ def run_campaign(
         resume,
     )
     stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
+    check_repeats(spec.name, store.path, stored.values(), getattr(evaluate, "repeats", None))
     optimiser = optimiser or make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, spec.config)
     done, generation = 0, 0
     pick = max if spec.maximize else min

@@ -7,8 +7,9 @@ arm's top-scored buffer latents against random G(z) worlds.
 For every seed's run directory ``--work/<arm>/s<seed>`` it reads the last buffer snapshot
 (``curricula.snapshots``), decodes the ``--top`` latents of highest score with the benchmark's
 generator (read from ``--work``'s ``curriculum-<env>.json``, else ``--generator``), and averages
-each of ``spec.metrics.descriptors`` over them; ``random`` is the same over ``--random`` worlds
-z ~ N(0, I). A curriculum that trains on worlds unlike the evaluation's shows here.
+each of ``spec.metrics.descriptors`` over them, and ``new_share``, the share of them that are in
+no dataset world (by cells; with an open repair, new worlds); ``random`` is the same over
+``--random`` worlds z ~ N(0, I). A curriculum that trains on worlds unlike the evaluation's shows here.
 """
 
 from __future__ import annotations
@@ -39,6 +40,13 @@ def descriptor_means(spec, G, latents: np.ndarray) -> dict[str, float]:
     return {name: float(np.mean([f(w) for w in one])) for name, f in spec.metrics.descriptors.items()}
 
 
+def new_share(spec, G, dataset, latents: np.ndarray) -> float:
+    """The share of the worlds G decodes ``latents`` to whose cells equal no world of ``dataset``."""
+    known = {row.tobytes() for row in dataset.cells}
+    cells = np.asarray(spec.cells(G(jnp.asarray(latents, jnp.float32))), np.uint8)
+    return float(np.mean([row.tobytes() not in known for row in cells]))
+
+
 def favoured(run_dir: Path, top: int) -> np.ndarray | None:
     """The ``top`` highest-scored latents of the run's last buffer snapshot (None: no snapshot)."""
     snapshots = load_snapshots(run_dir)
@@ -63,14 +71,16 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     spec = registry.get(args.env)
     gen_dir = args.generator or Path(json.loads((RESULTS / f"curriculum-{args.env}.json").read_text())["generator"])
-    G = load_generator(gen_dir)[0]
+    G, _, dataset = load_generator(gen_dir)
     rows = {"random": descriptor_means(spec, G, np.random.default_rng(0).standard_normal((args.random, G.latent_dim)))}
     per_seed = {}
     for arm in args.arms:
         found = {s: favoured(args.work / arm / f"s{s}", args.top) for s in args.seeds}
-        per_seed[arm] = {str(s): descriptor_means(spec, G, z) for s, z in found.items() if z is not None}
+        per_seed[arm] = {
+            str(s): {**descriptor_means(spec, G, z), "new_share": new_share(spec, G, dataset, z)} for s, z in found.items() if z is not None
+        }
         if per_seed[arm]:
-            rows[arm] = {name: mean_and_ci([v[name] for v in per_seed[arm].values()]) for name in spec.metrics.descriptors}
+            rows[arm] = {name: mean_and_ci([v[name] for v in per_seed[arm].values()]) for name in (*spec.metrics.descriptors, "new_share")}
     payload = {
         "benchmark": "curriculum-buffers",
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

@@ -4,7 +4,8 @@
 the numbers ``results.env_results`` recomputes from its run store, the generator's
 ``quality.json``, the agents' learning curves and ``influence.json`` (where each lives:
 ``runs.RunLayout``, read through ``runs.Run``), and writes ``run_dir/report.html``: inline CSS, every figure a
-base64 PNG. It reads like a result: the headline numbers beside the paper's first, then the
+base64 PNG. It reads like a result: where this run departs from the paper first (``departures``: each
+gap with its likely cause and a link to its section), the headline numbers beside the paper's, then the
 figures behind them, the provenance (versions, phases, the preset) last and folded; it ends its
 headline section with the ``worldagent explore`` command that opens the same run interactively.
 Each headline number is printed next to the paper's value (``spec.paper``) and
@@ -22,6 +23,7 @@ from pathlib import Path
 from worldagent.envs import registry
 from worldagent.files import write_text
 from worldagent.reports.curriculum import curriculum_section
+from worldagent.reports.departures import departures_section, differs, seeds_of
 from worldagent.reports.influence import training_regime
 from worldagent.reports.page import CSS, esc, fmt, image, missing, number, phase_state, section, table
 from worldagent.reports.provenance import overview
@@ -31,6 +33,7 @@ from worldagent.runs import Run
 REPORT_FILE = "report.html"
 # The result first (ours beside the paper's), then the figures behind it, provenance last and folded.
 SECTIONS = (
+    ("departures", "Where this run departs from the paper"),
     ("headline", "Headline numbers, ours beside the paper's"),
     ("random", "Random evaluation (Figure 6a)"),
     ("strategic", "Strategic evaluation (Figures 1, 6b)"),
@@ -252,6 +255,12 @@ def influence_section(run_dir: Path, results: dict) -> str:
             f"<p class='error' data-flag='failed-training'>Warning: the {esc(name)} agent {esc(why)}; its seed weighs on the means and intervals.</p>"
             for name, why in result.get("failed_training", {}).items()
         )
+        seeds = seeds_of(res)
+        if seeds == 1:
+            failed += (
+                "<p class='warning' data-flag='one-seed'>One seed per arm: each mean below is one agent's, and one agent cannot show "
+                "which way influencing moves a metric; train more seeds (the paper's preset trains several) before reading a direction.</p>"
+            )
         return (
             failed + f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
             f"became the influenced training distribution; agents trained with seeds {esc(', '.join(map(str, result['config']['seeds'])))}, "
@@ -343,19 +352,30 @@ def pair_list(run_dir: Path, outputs: dict) -> str:
 HEADLINE_DIGITS = 3  # significant digits: the paper prints two
 
 
-def headline_section(rows: list[Headline], run_dir: Path) -> str:
+def headline_table(rows: list[Headline]) -> str:
+    """Ours beside the paper's; a number that departs from it (``departures.differs``) is marked."""
     notes = any(row.note for row in rows)
     body = [
         [
             f"<td>{esc(row.label)}</td>",
             number(row.key, row.ours, HEADLINE_DIGITS),
             f"<td class='num'>{'–' if row.paper is None else fmt(row.paper)}</td>",
+            "<td class='differs'>differs</td>" if differs(row.ours, row.paper) else "<td></td>",
             *([f"<td>{esc(row.note)}</td>"] if notes else []),
         ]
         for row in rows
     ]
+    return table(["quantity", "ours", "paper", "", *(["note"] if notes else [])], body, raw_cells=True)
+
+
+def headline_section(rows: list[Headline], run_dir: Path) -> str:
+    """The numbers the paper reports first; the others (raw values, numbers it does not give) folded below them."""
+    compared = [row for row in rows if row.paper is not None]
+    others = [row for row in rows if row.paper is None]
+    folded = f"<details><summary>{len(others)} more numbers of this run (the paper gives none)</summary>{headline_table(others)}</details>"
     return (
-        table(["quantity", "ours", "paper", *(["note"] if notes else [])], body, raw_cells=True)
+        headline_table(compared)
+        + (folded if others else "")
         + "<p>Ours are recomputed from the run stores when the report is built (n/a: the phase has not run; –: the paper gives no number). "
         "Normalised: by the main metric's rule-given range where the environment has one (racing), otherwise by the run's "
         "best single episode (harvest; see the module docstring of <code>worldagent.reports.results</code>).</p>" + explorer_hint(run_dir)
@@ -388,6 +408,7 @@ def build_report(run_dir: Path | str) -> Path:
         "influence": influence_section(run_dir, results),
         "atlas": atlas_section(run_dir, results),
         "headline": headline_section(headlines(results), run_dir),
+        "departures": departures_section(headlines(results), results, manifest.get("preset")),
     }
     nav = "<nav>" + "".join(f'<a href="#{anchor}">{esc(title)}</a>' for anchor, title in SECTIONS) + "</nav>"
     title = f"Reproduction, {manifest.get('preset', '?')} preset ({', '.join(envs)})"

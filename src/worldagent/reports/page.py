@@ -16,6 +16,7 @@ table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.92em}th,td{border:
 th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}
 img{max-width:100%;border:1px solid #eee;margin:.4em 0}figure{margin:.6em 0 1.4em}figcaption{font-size:.88em;color:#555}
 .missing{color:#a66;font-style:italic}.warning{color:#a50}.error{color:#b00;font-family:monospace;white-space:pre-wrap}
+.departures{background:#fff6e5;border-left:4px solid #e0a030;padding:.4em 1em}td.differs{color:#b00;font-weight:600}
 nav a{margin-right:1em}details{margin:.6em 0}summary{cursor:pointer;color:#444}p.explore{background:#eef5ee;padding:.5em .8em;border-left:3px solid #5a5}code,pre{background:#f6f6f6;padding:.1em .3em}pre{padding:.6em;overflow-x:auto;font-size:.85em}
 """
 

@@ -224,12 +224,15 @@ def influence_headlines(env: str, res: dict) -> list[Headline]:
     """Default and influenced means (over seeds) of the highlighted metrics, and the main metric's change in %."""
     spec = registry.get(env)
     summary = (res.get("influence") or {}).get("summary", {})
+    seeds = len(((res.get("influence") or {}).get("config") or {}).get("seeds", ())) or None
+    note = "one seed per arm: no direction can be read" if seeds == 1 else ""
     rows = [
         Headline(
             f"{env}.influence.{metric}_{which}",
             f"{env.capitalize()} influence: {label(metric)}, {which} training",
             pick(summary, metric, which, "mean"),
             spec.paper.get(f"influence.{metric}.{which}"),
+            note,
         )
         for metric in spec.metrics.highlighted
         for which in ("default", "influenced")
@@ -240,6 +243,7 @@ def influence_headlines(env: str, res: dict) -> list[Headline]:
             f"{env.capitalize()} influence: reward change, % (normalised)",
             reward_change(spec, res),
             spec.paper.get("influence.reward_change_pct"),
+            note,
         )
     )
     return rows

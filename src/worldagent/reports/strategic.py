@@ -26,6 +26,10 @@ from worldagent.evaluation.trajectories import Episodes, replay
 from worldagent.files import write_atomically
 from worldagent.store import Evaluation
 
+# Points: the figure is 1,500 px wide and shown at the report's ~1,050 px, so text is drawn at 0.7 of its size;
+# these stay readable there (titles and legends at 7-9 pt were not).
+TEXT, SMALL = 13, 11
+
 
 def episode_keys_for(key: Any, index: int, repeats: int) -> jax.Array:
     """``[repeats]`` keys for world ``index`` (0 low, 1 high) from ``strategic_figure``'s ``key``."""
@@ -65,7 +69,7 @@ def _world_panel(axis, spec: EnvSpec, env, policy, params, evaluation: Evaluatio
     scored = np.isclose(drawn.mean(), evaluation.score, rtol=1e-4, atol=1e-3) and len(drawn) == len(evaluation.episodes)
     drawn_note = "the scored episodes" if scored else f"fresh episodes, mean {drawn.mean():.4g}"
     extra = _normalised_note(spec, metric, evaluation, params)
-    axis.set_title(f"{label} {metric}: {evaluation.score:.4g}{extra}\n{ending_summary(spec, episodes)}\n(drawn: {drawn_note})", fontsize=9)
+    axis.set_title(f"{label} {metric}: {evaluation.score:.4g}{extra}\n{ending_summary(spec, episodes)}\n(drawn: {drawn_note})", fontsize=TEXT)
     axis.set_xticks([])
     axis.set_yticks([])
     return episodes
@@ -98,14 +102,15 @@ def _distribution_panel(axis, random_scores: np.ndarray, low: Evaluation, high: 
     for value, style in marks:
         axis.axvline(value, **style)
     axis.set_xlim(bins[0], bins[-1])
-    axis.set_xlabel(metric)
-    axis.set_ylabel("random worlds")
-    axis.set_title(f"{metric} of the optimised worlds vs random worlds", fontsize=9)
-    axis.legend(fontsize=7, loc="upper left")
+    axis.set_xlabel(metric, fontsize=TEXT)
+    axis.set_ylabel("random worlds", fontsize=TEXT)
+    axis.set_title(f"{metric} of the optimised worlds vs random worlds", fontsize=TEXT)
+    axis.tick_params(labelsize=SMALL)
+    axis.legend(fontsize=SMALL, loc="upper left")
     bulk = np.quantile(scores, [0.05, 0.95])
     if bulk[1] - bulk[0] < 0.2 * (bins[-1] - bins[0]):
         axis.set_yscale("log")
-        axis.set_ylabel("random worlds (log scale)")
+        axis.set_ylabel("random worlds (log scale)", fontsize=TEXT)
         _zoom_inset(axis, scores, bulk, marks)
 
 
@@ -135,8 +140,8 @@ def _zoom_inset(axis, scores: np.ndarray, bulk: np.ndarray, marks) -> None:
         if lo <= value <= hi:
             inset.axvline(value, **{k: v for k, v in style.items() if k != "label"})
     inset.set_xlim(lo, hi)
-    inset.set_title(f"zoom: {len(inside)} of {len(scores)} random worlds", fontsize=7)
-    inset.tick_params(labelsize=6)
+    inset.set_title(f"zoom: {len(inside)} of {len(scores)} random worlds", fontsize=SMALL)
+    inset.tick_params(labelsize=SMALL - 1)
 
 
 def strategic_figure(
@@ -165,12 +170,12 @@ def strategic_figure(
     spec = registry.get(spec)
     plt = _pyplot()
     params = env.default_params if params is None else params
-    figure, axes = plt.subplots(1, 3, figsize=(15, 5.6), dpi=120, gridspec_kw={"width_ratios": [1, 1, 1.25]})
+    figure, axes = plt.subplots(1, 3, figsize=(15, 6.2), dpi=100, gridspec_kw={"width_ratios": [1, 1, 1.25]})
     for index, (evaluation, label) in enumerate(((low, "minimum"), (high, "maximum"))):
         keys = episode_keys_for(key, index, max(len(evaluation.episodes), 1))
         _world_panel(axes[index], spec, env, policy, params, evaluation, keys, metric, label)
     _distribution_panel(axes[2], random_scores, low, high, metric)
-    figure.suptitle(f"{spec.name}: strategic evaluation of {getattr(policy, 'name', 'the agents')} ({metric})", fontsize=11)
+    figure.suptitle(f"{spec.name}: strategic evaluation of {getattr(policy, 'name', 'the agents')} ({metric})", fontsize=TEXT + 2)
     figure.tight_layout(rect=(0, 0, 1, 0.95))
     path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png"))
     plt.close(figure)

@@ -211,4 +211,4 @@ def draw_episodes(axis, world: HarvestMap, episodes) -> None:
     returns = np.asarray(episodes.metrics.get("returns", np.zeros((len(episodes), counts.shape[0]))), np.float64)
     handles = [Patch(color=AGENT_COLOURS[a], label=f"agent {a}: return {returns[:, a].mean():.1f}") for a in range(counts.shape[0])]
     handles.append(Patch(color=np.asarray(APPLE) / 255, label="apple site"))
-    axis.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.02), ncol=3, fontsize=7, frameon=False)
+    axis.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.02), ncol=3, fontsize=11, frameon=False)

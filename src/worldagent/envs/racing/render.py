@@ -156,7 +156,7 @@ def draw_episodes(axis, world: Track, episodes) -> None:
     start, ahead = centreline[0], centreline[min(6, len(centreline) - 1)]
     axis.scatter([start[0]], [start[1]], marker="o", s=45, color="white", edgecolors="black", zorder=6, label="start")
     axis.annotate("", xy=tuple(ahead), xytext=tuple(start), arrowprops={"arrowstyle": "->", "color": "white", "linewidth": 1.5}, zorder=6)
-    axis.legend(loc="lower right", fontsize=7, framealpha=0.8)
+    axis.legend(loc="lower right", fontsize=11, framealpha=0.8)
     lower, upper = track_view(centreline, VIEW_EXTENT)
     axis.set_xlim(lower[0], upper[0])
     axis.set_ylim(lower[1], upper[1])

@@ -142,14 +142,14 @@ LatentText = Annotated[str | None, Query(max_length=4096)]
 WorldIndex = Annotated[int | None, Query(ge=0)]
 
 
-def resolve(env: EnvSession, world: int | None, z: list[float] | None) -> tuple[Any, dict]:
+def resolve(env: EnvSession, world: int | None, z: list[float] | None, superseded=lambda: False) -> tuple[Any, dict]:
     """(the world, where it came from) of a stored world's index or a latent (exactly one)."""
     if (world is None) == (z is None):
         raise WorldagentError("give either world=I (a stored world) or z=a,b,... (a latent).")
     if world is not None:
         return env.stored_world(world), env.world_summary(world)
     latent = check_latent(env, z)
-    return env.decode(latent), {"latent": latent.tolist()}
+    return env.decode(latent, superseded), {"latent": latent.tolist()}
 
 
 def make_app(session: Session, token: str | None = None) -> FastAPI:
@@ -244,9 +244,7 @@ def add_world_actions(app: FastAPI, Env: Any) -> None:
     def play(env: Env, request: PlayRequest) -> Response:
         plays.arrived(env.env, request.client, request.seq)
         superseded = lambda: plays.superseded(env.env, request.client, request.seq)  # noqa: E731
-        if superseded():
-            raise Superseded
-        world, _ = resolve(env, request.world, request.z)
+        world, _ = resolve(env, request.world, request.z, superseded)
         played = env.play(world, request.agent, request.episodes, request.seed, request.size, superseded)
         source = {"world": request.world} if request.world is not None else {"z": request.z}
         return plain_json({**played, **source, "agent": request.agent, "seed": request.seed, "seq": request.seq})

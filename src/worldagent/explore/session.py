@@ -302,12 +302,14 @@ class EnvSession:
             raise WorldagentError(f"a {self.env} latent has {self.latent_dim} numbers, not {z.size}.")
         return z
 
-    def decode(self, z) -> Any:
-        """The world G(z) (unbatched) of one latent."""
+    def decode(self, z, superseded: Callable[[], bool] = lambda: False) -> Any:
+        """The world G(z) (unbatched) of one latent; ``superseded`` as in ``play`` (a superseded play decodes nothing)."""
         import jax
 
         z = self.check_latent(z)
         with self.lock:
+            if superseded():
+                raise Superseded
             generator, decode = self.generator()
             rows = np.zeros((DECODE_ROWS, self.latent_dim), np.float32)
             rows[0] = z

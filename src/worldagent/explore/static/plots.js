@@ -5,8 +5,8 @@
 const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
 // Diverging around a failure threshold: red on the failing side, blue on the passing side, grey at the threshold.
 const DIVERGING = { fail: [178, 24, 43], mid: [205, 205, 205], pass: [33, 102, 172] };
-const SHAPES = ["circle", "square", "triangle", "diamond", "down", "plus", "star"];
-const SYMBOLS = { circle: "●", square: "■", triangle: "▲", diamond: "◆", down: "▼", plus: "✚", star: "★" };
+const SHAPES = ["circle", "square", "triangle", "diamond", "down", "plus", "star", "hexagon", "left", "cross", "right"];  // one per campaign
+const SYMBOLS = { circle: "●", square: "■", triangle: "▲", diamond: "◆", down: "▼", plus: "✚", star: "★", hexagon: "⬢", left: "◀", cross: "✖", right: "▶" };
 
 function fmt(v) { return v === null || v === undefined ? "n/a" : Math.abs(v) >= 1000 || Number.isInteger(v) ? String(Math.round(v * 100) / 100) : Number(v).toPrecision(3); }
 function esc(text) { return String(text).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]); }
@@ -108,7 +108,19 @@ function drawShape(ctx, shape, x, y, r) {
     const s = shape === "down" ? -1 : 1;
     ctx.moveTo(x, y - s * 1.2 * r); ctx.lineTo(x + 1.1 * r, y + s * 0.8 * r); ctx.lineTo(x - 1.1 * r, y + s * 0.8 * r); ctx.closePath();
   } else if (shape === "diamond") { ctx.moveTo(x, y - 1.3 * r); ctx.lineTo(x + 1.3 * r, y); ctx.lineTo(x, y + 1.3 * r); ctx.lineTo(x - 1.3 * r, y); ctx.closePath(); }
-  else if (shape === "plus") { const w = 0.45 * r; ctx.rect(x - 1.2 * r, y - w, 2.4 * r, 2 * w); ctx.rect(x - w, y - 1.2 * r, 2 * w, 2.4 * r); }
+  else if (shape === "left" || shape === "right") {
+    const s = shape === "left" ? 1 : -1;
+    ctx.moveTo(x - s * 1.2 * r, y); ctx.lineTo(x + s * 0.8 * r, y - 1.1 * r); ctx.lineTo(x + s * 0.8 * r, y + 1.1 * r); ctx.closePath();
+  } else if (shape === "hexagon") {
+    for (let k = 0; k < 6; k++) { const a = (k * Math.PI) / 3; k ? ctx.lineTo(x + 1.15 * r * Math.cos(a), y + 1.15 * r * Math.sin(a)) : ctx.moveTo(x + 1.15 * r, y); }
+    ctx.closePath();
+  } else if (shape === "cross") {
+    const w = 0.45 * r, c = Math.SQRT1_2;
+    for (const [dx, dy] of [[c, c], [c, -c]]) {  // two bars at ±45°
+      ctx.moveTo(x - 1.3 * r * dx - w * dy, y - 1.3 * r * dy + w * dx); ctx.lineTo(x + 1.3 * r * dx - w * dy, y + 1.3 * r * dy + w * dx);
+      ctx.lineTo(x + 1.3 * r * dx + w * dy, y + 1.3 * r * dy - w * dx); ctx.lineTo(x - 1.3 * r * dx + w * dy, y - 1.3 * r * dy - w * dx); ctx.closePath();
+    }
+  } else if (shape === "plus") { const w = 0.45 * r; ctx.rect(x - 1.2 * r, y - w, 2.4 * r, 2 * w); ctx.rect(x - w, y - 1.2 * r, 2 * w, 2.4 * r); }
   else if (shape === "star") {
     for (let k = 0; k < 10; k++) { const a = -Math.PI / 2 + (k * Math.PI) / 5, d = k % 2 ? 0.55 * r : 1.4 * r; k ? ctx.lineTo(x + d * Math.cos(a), y + d * Math.sin(a)) : ctx.moveTo(x + d * Math.cos(a), y + d * Math.sin(a)); }
     ctx.closePath();

@@ -5,9 +5,9 @@
 const CLIENT = Math.random().toString(36).slice(2, 12);  // this page: the server drops its plays that a newer one overtook
 const TRAILS = ["#1f5fe0", "#ff3b1f", "#ffd400", "#e01fd2", "#00d8ff", "#ff8c00", "#ffffff", "#8a2be2"];  // no grey or green: roads, grass, floors
 const LONG_EPISODE = 400, RECENT_TRAIL = 60;  // steps
-// ms a slider must rest before the agents replay: a drag or quick key presses make one play, not one per step
-// (the picture itself follows within 60 ms); a play still running when it rests is dropped on arrival.
-const PLAY_SETTLE = 250;
+// ms a slider rests before its world is drawn and replayed: a drag makes a few requests, not one per pixel. Quick
+// moves then cost at most the play already running plus the latest one: the server skips the plays in between.
+const SLIDER_REST = 60;
 
 // -- world --------------------------------------------------------------------------------
 
@@ -52,18 +52,15 @@ function onSlider(event) {
   state.world = null;  // the world is now G(z), not the stored one
   newWorld();
   clearTimeout(sliderTimer);
-  clearTimeout(settleTimer);
-  sliderTimer = setTimeout(() => redrawLatent(false), 60);
-  if (state.played) settleTimer = setTimeout(play, PLAY_SETTLE);  // replay once the slider rests, not at every step of a drag
+  sliderTimer = setTimeout(redrawLatent, SLIDER_REST);
 }
 
-let settleTimer = null;
-function redrawLatent(replay = true) {
+function redrawLatent() {
   newWorld();
   setPicture(`/api/${state.env}/decode.png?z=${zParam(state.z)}`);
   $("world-title").textContent = `G(z) of ${state.env}`;
   updateExport();
-  if (replay && state.played) play();  // and replay on the new world
+  if (state.played) play();  // and replay on the new world: an older play still running is dropped, one still waiting is skipped
 }
 
 function setPicture(src) {

@@ -350,7 +350,11 @@ class EnvSession:
         their first click would wait for. An agent that cannot load is skipped with one line to ``echo``."""
         if not self.run.has_generator(self.env):
             return
-        world = self.decode(np.zeros(self.latent_dim))
+        self.warming = "G(z)"
+        try:
+            world = self.decode(np.zeros(self.latent_dim))
+        finally:
+            self.warming = None
         for agent in self.agents if agents is None else agents:
             if (agent, episode_bucket(episodes)) in self.ready:
                 continue

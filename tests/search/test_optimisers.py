@@ -29,9 +29,10 @@ def best_after(name, budget, maximize=False, seed=0, objective=sphere):
 
 @pytest.mark.parametrize("name, budget", [("cmaes", 21 * 8), ("bo", 24)])
 def test_minimises_a_sphere_and_beats_random_search(name, budget):
-    # medians over 5 seeds: at 24 evaluations one seed's best swings by 2x with the GP's fit
-    found = np.median([best_after(name, budget, seed=s) for s in range(5)])
-    random = np.median([best_after("random", budget, seed=s) for s in range(5)])
+    # medians over 9 seeds: at 24 evaluations one seed's best swings by 8x with the GP's fit (1.4 to 11.5 with
+    # scikit-learn 1.9, scipy 1.17, bayesian-optimization 3.4), and 5 seeds' median fell to 0.64 of random's
+    found = np.median([best_after(name, budget, seed=s) for s in range(9)])
+    random = np.median([best_after("random", budget, seed=s) for s in range(9)])
     assert found < 0.6 * random
     assert found < 0.5 * np.sum(CENTRE**2)  # well below the prior's centre, z = 0
 

@@ -23,9 +23,9 @@ def draw_worlds(env: str, n: int, seed: int, out: Path) -> Path:
         raise WorldagentError(f"--n is {n}; ask for at least one world.")
     check_counts(caps={"n": PICTURE_CAP}, n=n)
     check_seed(seed)
+    check_writable(out, folder=False)
     if out.suffix.lower() != ".png":
         raise WorldagentError(f"--out {out}: the worlds are drawn as a PNG picture; pass a .png file name, e.g. --out {out.with_suffix('.png')}.")
-    check_writable(out, folder=False)
     if spec.pictures.sheet is None:
         raise WorldagentError(f"{spec.name} registers no picture sheet (pictures.sheet); it cannot be drawn here.")
     return spec.pictures.sheet(spec.generate(np.arange(seed, seed + n, dtype=np.int64)), out)

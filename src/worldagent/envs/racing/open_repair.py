@@ -72,10 +72,10 @@ def _features(profiles: jax.Array) -> jax.Array:
     return jnp.concatenate([profiles, jnp.ones((*profiles.shape[:-1], 1), profiles.dtype)], axis=-1)
 
 
-def project(unit: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(centrelines f32[B, K, 2], the draws used f32[B, 20]) for draws ``unit`` f32[B, 20] in [0, 1]:
-    the walker's tracks, and where it rejects a set, the track of the first of ``SHRINK``'s steps
-    towards the centre of the ranges that it accepts (one more walk of the batch per step taken)."""
+def project(unit: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """(centrelines f32[B, K, 2], the draws used f32[B, 20], accepted bool[B]) for draws ``unit`` f32[B, 20]
+    in [0, 1]: the walker's tracks, and where it rejects a set, the track of the first of ``SHRINK``'s
+    steps towards the centre of the ranges that it accepts (one more walk of the batch per step taken)."""
     steps = jnp.asarray(SHRINK, jnp.float32)
 
     def attempt(carry):
@@ -89,8 +89,8 @@ def project(unit: jax.Array) -> tuple[jax.Array, jax.Array]:
         return ~carry[1].all() & (carry[0] < len(SHRINK) - 1)
 
     lines, accepted = walker.build(*from_unit(unit))
-    _, _, used, lines = jax.lax.while_loop(rejected, attempt, (jnp.int32(0), accepted, unit, lines))
-    return lines, used
+    _, accepted, used, lines = jax.lax.while_loop(rejected, attempt, (jnp.int32(0), accepted, unit, lines))
+    return lines, used, accepted
 
 
 @struct.dataclass
@@ -122,7 +122,7 @@ class OpenTracks:
 
     def __call__(self, logits: jax.Array) -> Track:
         """Valid tracks for decoded footprint logits f32[B, 4096] (batched, jittable)."""
-        lines, _ = project(self.draws(logits))
+        lines, _, _ = project(self.draws(logits))
         return jax.vmap(walker.track_from_centreline)(lines)
 
 

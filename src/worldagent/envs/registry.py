@@ -205,6 +205,10 @@ class EnvSpec:
         episode_note: ``episodes' metrics {name: [E]} -> str``: a few words on how episodes ended.
         raw_decode: ``logits f32[B, D] -> worlds`` without repair (thresholded cells), for the
             generator's "valid before repair" figure; None when cells do not determine a world.
+        world_sets: ``name -> () -> batched world`` (numpy, leading axis N): named sets of worlds
+            agents are scored on as they are, e.g. held-out evaluation sets such as the UED maze
+            prefabs (``worldagent evaluate worlds ENV --worlds NAME``; ``worldagent check`` checks
+            every world). Built on demand, so a large set costs nothing until asked for. Empty: none.
     """
 
     name: str
@@ -233,6 +237,7 @@ class EnvSpec:
     episode_note: Callable[[dict], str] | None = None
     raw_decode: Callable[[Any], Any] | None = None
     repairs: Mapping[str, Callable[[Any, Mapping[str, Any]], Any]] = field(default_factory=dict)
+    world_sets: Mapping[str, Callable[[], Any]] = field(default_factory=dict)
 
     @property
     def default_algorithm(self) -> str:

@@ -3,6 +3,7 @@
 - ``setup(env, agent, generator)``: what every experiment needs, resolved and checked once.
 - ``search``: one campaign (``worldagent search``).
 - ``random_evaluation``: the metric over worlds z ~ N(0, I) (§6.1.1, Figure 6a).
+- ``worlds_evaluation``: the metric over given worlds (a dataset file, explorer exports, a named set).
 - ``strategic_evaluation``: one campaign minimising and one maximising the metric; the worst
   and best worlds found (§6.1.2, Figures 1 and 6b).
 - ``compare_optimisers``: the optimisers' sample efficiency (§6.1.3, Figure 7).
@@ -49,6 +50,11 @@ def random_campaign_name(metric: str, seed: int) -> str:
     return f"random-{metric}-s{seed}"
 
 
+def worlds_campaign_name(tag: str, metric: str, seed: int) -> str:
+    """``worlds-prefabs-return-s0``: the evaluation of a given world set (``search.given.WorldSet.tag``)."""
+    return f"worlds-{tag}-{metric}-s{seed}"
+
+
 def strategic_campaign_names(optimiser: str, metric: str, seed: int) -> tuple[str, str]:
     """(minimising, maximising) campaign names of a strategic evaluation."""
     return campaign_name(optimiser, False, metric, seed), campaign_name(optimiser, True, metric, seed)
@@ -83,7 +89,7 @@ class Setup:
         spec: the env's ``EnvSpec``.
         env, params: ``spec.make_env(options)``.
         policy: the agents (a ``Policy``; external ones have ``host = True``).
-        generator: G(z) of ``spec``'s worlds.
+        generator: G(z) of ``spec``'s worlds (None: given worlds only).
         repeats: episodes per world (the paper: 8).
         options: the env options (checked, defaults filled in).
         backend: where campaigns evaluate their world batches (``evaluation.backends``; None: here).
@@ -121,7 +127,8 @@ def setup(
         agent: a ``Policy`` or ``HostPolicy``, or text ``agents.loaders.load_agent`` reads: a
             ``worldagent train`` run dir, the policy dir inside it, a scripted policy's name
             (``spec.scripted``), a ``.onnx`` model, a Stable-Baselines3 ``.zip``, or ``module:function``.
-        generator: a ``Generator`` or its directory (``worldagent generator train``).
+        generator: a ``Generator`` or its directory (``worldagent generator train``); None for
+            experiments on given worlds only (``worlds_evaluation``).
         options: env options (harvest: ``{"tagger": (0,)}``); those not given are the saved agent's
             own (``policy.json``), then the defaults.
         greedy: trained actor-critics act by argmax instead of sampling.
@@ -142,7 +149,7 @@ def setup(
         where, generator = generator, load_generator(generator)[0]
         if generator.env != spec.name:
             raise WorldagentError(f"the generator in {where} makes {generator.env} worlds; pass a {spec.name} generator.")
-    elif generator.env != spec.name:
+    elif generator is not None and generator.env != spec.name:
         raise WorldagentError(f"the generator makes {generator.env} worlds; pass a {spec.name} generator.")
     if isinstance(agent, str):
         from worldagent.agents.loaders import load_agent
@@ -229,6 +236,25 @@ def random_evaluation(
         store, setup, metric, maximize=True, optimiser="random", budget=worlds, seed=seed, name=name, resume=resume, progress=progress, config=config
     )
     return found[:worlds]
+
+
+def worlds_evaluation(store: RunStore, setup: Setup, given: Any, metric: str = "reward", *, seed: int = 0, progress: bool = True) -> list[Evaluation]:
+    """The metric on every world of a given set (DESIGN.md "Named world sets"): a dataset file, explorer exports, or
+    one of ``spec.world_sets`` (``search.given.world_set``), stored as campaign ``worlds_campaign_name`` and resumed
+    by a rerun. With a generator in ``setup``, each world is stored at its encoder mean (the explorer maps it);
+    without, with no latent.
+
+    Returns:
+        One evaluation per world, in the set's order.
+    """
+    from worldagent.search.given import GivenWorlds, encoder_latents, run_given
+
+    metric = setup.metric(metric)
+    evaluate = GivenWorlds(Objective(setup.spec.name, metric, False), setup.env, setup.policy, given.worlds, setup.repeats, setup.params)
+    latents = None if setup.generator is None else encoder_latents(setup.spec, setup.generator, given.worlds)
+    name = worlds_campaign_name(given.tag, metric, seed)
+    agent = agent_record(setup.policy)
+    return run_given(store, name, evaluate, given, seed=seed, agent=agent, latents=latents, backend=setup.backend, progress=progress)
 
 
 def random_scores(store: RunStore, metric: str, seed: int) -> np.ndarray:

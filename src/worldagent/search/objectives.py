@@ -99,12 +99,20 @@ class LatentObjective:
     def __call__(self, z: np.ndarray, seeds: np.ndarray) -> list[Outcome]:
         self.generator.check_latents(np.asarray(z))
         worlds = generate(self.generator, jnp.asarray(z, jnp.float32))
-        keys = jnp.stack([jax.random.split(jax.random.key(int(seed)), self.repeats) for seed in seeds])
-        metrics = evaluate(self.env, self.policy, worlds, self.repeats, None, self.params, keys=keys)
-        metrics = self.spec.metrics.with_derived(metrics, self.params)
-        scores = np.asarray(metrics[self.objective.metric], np.float64).mean(axis=1)
-        outcomes = []
-        for b in range(len(z)):
-            world = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[b]), worlds) if self.keep_worlds else None
-            outcomes.append(Outcome(float(scores[b]), episode_records(metrics, b), world))
-        return outcomes
+        return play_outcomes(self.objective, self.env, self.policy, worlds, seeds, self.repeats, self.params, self.keep_worlds)
+
+
+def play_outcomes(
+    objective: Objective, env, policy, worlds: Any, seeds: np.ndarray, repeats: int, params: Any, keep_worlds: bool = True
+) -> list[Outcome]:
+    """The outcome of each of ``worlds`` (batched, one per seed): the world played ``repeats`` times with its seed's
+    keys, scored by the objective's metric averaged over those episodes (raw and derived metrics kept per episode)."""
+    spec = registry.get(objective.env)
+    keys = jnp.stack([jax.random.split(jax.random.key(int(seed)), repeats) for seed in seeds])
+    metrics = spec.metrics.with_derived(evaluate(env, policy, worlds, repeats, None, params, keys=keys), params)
+    scores = np.asarray(metrics[objective.metric], np.float64).mean(axis=1)
+    outcomes = []
+    for b in range(len(seeds)):
+        world = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[b]), worlds) if keep_worlds else None
+        outcomes.append(Outcome(float(scores[b]), episode_records(metrics, b), world))
+    return outcomes

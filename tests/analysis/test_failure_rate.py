@@ -275,6 +275,7 @@ def test_an_event_that_never_occurs_is_refused_by_the_search_and_bounded_by_mont
     assert (nothing.estimate, nothing.low, nothing.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 500)))
     fell_back = fr.importance_sampling(never, 10, 500, config=fr.ImportanceConfig(pool=5000))  # no model of it: no gain predicted
     assert fell_back.method == "mc" and "cannot place the event" in fell_back.fallback and fell_back.worlds == 500 + 500
+    assert fell_back.fallback.startswith("no pilot world met the event (0 of 500)")  # not a width of ±1e21 %
     assert (fell_back.estimate, fell_back.low, fell_back.high) == (0.0, 0.0, pytest.approx(1 - 0.025 ** (1 / 1000)))
 
 

@@ -79,6 +79,17 @@ def test_strata_hold_the_pool_and_the_plan_falls_back_when_it_does_not_pay():
     assert pooled.pool_size(None, 1.0, 1.0, 2000) == 2000 and pooled.pool_size(5000, 1.0, 1.0, 2000) == 5000
 
 
+def test_a_pilot_without_hits_falls_back_saying_so_and_what_to_change():
+    """Issue 42, item 5: no pilot world met the event; the model's P is its smoothing and its width meant nothing
+    (``±998279818084477173760%``)."""
+    barely = pooled.stratify(np.log(np.full(2000, 1e-22)))
+    blind = pooled.plan(barely, 2000, 500, 2000, None, 1e-3, 0.0, 2000, met=0)
+    assert blind.fallback.startswith("no pilot world met the event (0 of 500)") and "--pilot" in blind.fallback and "%" not in blind.fallback
+    unsure = pooled.plan(barely, 2000, 500, 2000, None, 1e-3, 0.0, 2000, met=1)
+    assert "cannot place the event (over ±1,000% predicted after 2,000 draws)" in unsure.fallback
+    assert pooled.width_text(2.4) == "±240%" and pooled.width_text(9.98e18) == "over ±1,000%"
+
+
 def test_monte_carlo_says_when_its_cap_stops_it_short_of_the_width():
     short = fr.monte_carlo(lambda z, s: fr.Scored(z[:, 0] - 3, z[:, 0] > 3, len(z)), 10, 2000, target_width=0.5)
     assert short.relative_half_width > 0.5 and "short of ±50%" in short.note and "cap of 2,000 worlds" in short.note

@@ -393,6 +393,7 @@ def surrogate_sampling(
         timing["describe_seconds"],
         timing.get("described", sample),
         confidence,
+        met=int(seen.sum()),
     )
     rounds = learning_worlds(config) - config.pilot
     learning = config.proposal == "learned" and learned.worth_learning(max(strata.probability, seen.mean()), target_width, rounds, confidence)

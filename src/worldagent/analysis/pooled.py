@@ -184,7 +184,7 @@ def pool_size(configured: int | None, budget_seconds: float, describe_seconds: f
 
 def plan(
     strata: Strata, pool: int, pilot: int, worlds: int, target_width: float | None, episode_seconds: float, describe_seconds: float,
-    described: int, confidence: float = 0.95, source: str = "the pilot's model",
+    described: int, confidence: float = 0.95, source: str = "the pilot's model", met: int | None = None,
 ) -> Plan:  # fmt: skip
     """The draws, and the gain over Monte Carlo at the width they reach, with the fallback's reason when it is below
     ``MIN_GAIN`` (in episodes, or in seconds where the pool's describing is measured).
@@ -193,6 +193,7 @@ def plan(
         strata: of the timed sample (its shares stand for the pool's).
         pool: M; pilot: worlds already played; worlds: draws at most; described: pool worlds already described.
         source: what the strata come from, in the fallback's reason.
+        met: pilot worlds that met the event (None: not known); with none, the fallback says so and what to change.
         episode_seconds, describe_seconds: per world.
     """
     probability = strata.probability
@@ -205,14 +206,25 @@ def plan(
     spent = (pilot + draws) * episode_seconds + describe_total
     gain_seconds = mc * episode_seconds / spent if spent > 0 else gain_episodes
     fallback = None
-    if MIN_GAIN > 0 and not width <= 1:
-        fallback = f"{source} cannot place the event (±{width:.0%} predicted after {draws:,} draws)"
+    if MIN_GAIN > 0 and not width <= 1 and met == 0:
+        # with no hit the model's P is its smoothing alone, and the width predicted from it means nothing
+        fallback = (
+            f"no pilot world met the event (0 of {pilot:,}), so {source} cannot place the event; "
+            "a larger --pilot, or a laxer event (e.g. a lower threshold), gives it hits to learn from"
+        )
+    elif MIN_GAIN > 0 and not width <= 1:
+        fallback = f"{source} cannot place the event ({width_text(width)} predicted after {draws:,} draws)"
     elif min(gain_episodes, gain_seconds) < MIN_GAIN:
         what, gain = ("in episodes", gain_episodes) if gain_episodes < MIN_GAIN else ("in seconds, describing the pool included", gain_seconds)
         fallback = f"importance sampling is predicted to gain {gain:.2g}x over Monte Carlo {what} (below {MIN_GAIN}x)"
     return Plan(
         pool, draws, probability, width, mc, gain_episodes, gain_seconds, episode_seconds, describe_seconds, describe_total, fallback
     )  # fmt: skip
+
+
+def width_text(width: float) -> str:
+    """``±240%``; a width past ±1,000% (a model that barely saw the event) as ``over ±1,000%``."""
+    return f"±{width:.0%}" if width <= 10 else "over ±1,000%"
 
 
 def stratified_estimate(

@@ -32,6 +32,14 @@ def heat_grid(archive: Any, grid: Any, maximize: bool) -> np.ndarray:
     return flat
 
 
+def marker_at(measures: np.ndarray, grid: Any) -> tuple[float, float]:
+    """Where a world is marked on the heat map: its first two descriptors clipped into the grid's ranges, the
+    edge cell ``cell_of`` puts values outside them in (with one descriptor, halfway up the unit height)."""
+    ranges = [*grid.ranges[:2], (0.0, 1.0)][:2]
+    values = [*np.asarray(measures, np.float64)[:2], 0.5][:2]
+    return tuple(float(np.clip(value, low, high)) for value, (low, high) in zip(values, ranges))
+
+
 def atlas_figure(summary: dict, setup: Any, metric: str, maximize: bool, loaded: Any, out: Path | str, count: int = 4) -> Path:
     """Draw an atlas (``experiments.atlas``'s result) to ``out`` (PNG).
 
@@ -69,8 +77,9 @@ def atlas_figure(summary: dict, setup: Any, metric: str, maximize: bool, loaded:
         world = spec.world_from_arrays(evaluation.world)
         episodes = replay(spec, setup.env, setup.policy, world, keys, setup.params)
         spec.pictures.episodes(axis, world, episodes)
-        top.scatter(*archive.measures[pick][:2], marker="o", s=90, facecolors="none", edgecolors="red")
-        top.annotate(str(slot + 1), archive.measures[pick][:2], color="red", fontsize=9, xytext=(4, 4), textcoords="offset points")
+        where = marker_at(archive.measures[pick], grid)  # the title below keeps the true values
+        top.scatter(*where, marker="o", s=90, facecolors="none", edgecolors="red")
+        top.annotate(str(slot + 1), where, color="red", fontsize=9, xytext=(4, 4), textcoords="offset points")
         described = ", ".join(f"{n} {v:.3g}" for n, v in zip(grid.descriptors, archive.measures[pick]))
         axis.set_title(f"{slot + 1}: score {archive.scores[pick]:.4g}\n{described}", fontsize=8)
         axis.set_xticks([])

@@ -327,10 +327,15 @@ def _collapse(reconstruction: dict, latent: dict) -> list[str]:
     if units < MIN_ACTIVE_UNITS or kl < MIN_KL_NATS:
         out.append(f"collapsed: {units} of {dims} latent dimensions active, KL {kl:.3g} nats in all; G(z) barely depends on z — {RETRAIN}.")
     vae, mean = reconstruction["vae"]["nll_per_world"], reconstruction["mean_image"]["nll_per_world"]
-    if vae > (1 - MIN_NLL_GAIN) * mean:
+    if vae > (1 - MIN_NLL_GAIN) * mean and out:
         out.append(
             f"collapsed: reconstruction no better than the mean world (held-out NLL {vae:.1f} vs {mean:.1f} nats per world): "
             f"z tells the decoder nothing it can use — {RETRAIN}, or train longer."
+        )
+    elif vae > (1 - MIN_NLL_GAIN) * mean:  # z in use, yet held-out worlds decode worse than the mean world: memorised
+        out.append(
+            f"overfit: held-out reconstruction no better than the mean world (NLL {vae:.1f} vs {mean:.1f} nats per world) though "
+            f"{units} of {dims} latent dimensions are in use: the VAE memorised its training worlds — train fewer --epochs or on more worlds."
         )
     return out
 
@@ -364,8 +369,9 @@ def _narrow(structure: dict) -> list[str]:
 def diagnose(reconstruction: dict, figures: dict, worlds: int) -> list[str]:
     """One-line warnings, each naming its fix, for a generator search cannot use (empty: none).
 
-    Collapsed: fewer than ``MIN_ACTIVE_UNITS`` active dimensions or under ``MIN_KL_NATS`` of KL,
-    or a held-out reconstruction within ``MIN_NLL_GAIN`` of the mean world's. Inert: a ±1 move
+    Collapsed: fewer than ``MIN_ACTIVE_UNITS`` active dimensions or under ``MIN_KL_NATS`` of KL
+    (and then also a held-out reconstruction within ``MIN_NLL_GAIN`` of the mean world's). Overfit:
+    that poor a held-out reconstruction while z is in use (the training worlds were memorised). Inert: a ±1 move
     along z changes under ``MIN_CHANGED_WORLD_SHARE`` of worlds, or the draws hold under
     ``MIN_DISTINCT_SHARE`` distinct worlds. Narrow: a descriptor whose std under G(z) is below
     ``MIN_SPREAD_RATIO`` of the dataset's.

@@ -10,7 +10,8 @@ up) finds the worlds where the agent meets the env's failure event (racing: ``cr
 (``--repeats`` episodes, the same keys), and a world *transfers* when at least ``--transfer`` of
 the other agents also fail on it. Per repair and agent: failing worlds found, and how many
 transfer; the failure matrix (world x agent) is kept, and the transferable worlds are written to
-``--out`` (an ``.npz`` of their latents and fields, per repair) for held-out evaluation.
+``--out`` (an ``.npz`` of their latents and fields, per repair) for held-out evaluation, and all
+agents' failing worlds to ``WORK/failing-REPAIR-EVENT.npz``.
 
 Recorded in ``benchmarks/results/transfer-failures.json`` under ``runs[FAILURE]`` (``--failure``: another
 event than the env's, e.g. a lower threshold; the atlases of one event are reused by a rerun).
@@ -107,12 +108,13 @@ def one_repair(spec, generator, agents: list[str], args, store) -> tuple[dict, n
         )
         print(f"{generator.repair_name} agent {i}: {len(latents)} failing worlds, {int(transfers.sum())} transfer", flush=True)
     latents = np.concatenate(transferable) if transferable else np.zeros((0, generator.latent_dim), np.float32)
+    every = np.concatenate([found_latents for found_latents, _ in found]) if found else latents[:0]
     summary = {
         "agents": per_agent,
         "failing_worlds": sum(a["failing_worlds"] for a in per_agent),
         "transferable": sum(a["transferable"] for a in per_agent),
     }
-    return summary, latents
+    return summary, latents, every
 
 
 def main() -> None:
@@ -144,8 +146,10 @@ def main() -> None:
     for name in spec.repair_names:
         generator = build_generator(vae, dataset, repair_name=name)
         with RunStore(args.work / f"atlas-{name}.sqlite") as store:
-            summary, latents = one_repair(spec, generator, args.agents, args, store)
-        out = args.out or args.work / f"transferable-{name}-{args.failure.replace(' ', '')}.npz"
+            summary, latents, every = one_repair(spec, generator, args.agents, args, store)
+        event = args.failure.replace(" ", "")
+        np.savez(args.work / f"failing-{name}-{event}.npz", latents=every)  # every agent's, for a held-out set
+        out = args.out or args.work / f"transferable-{name}-{event}.npz"
         worlds = generate(generator, latents) if len(latents) else None
         fields = {f"world/{k}": np.asarray(v) for k, v in (vars(worlds).items() if worlds is not None else [])}
         np.savez(out, latents=latents, **fields)

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from worldagent.envs.racing.tracks import CHECKPOINTS, MAX_ITERATIONS, START_ALPHA  # upstream's, one place
 from worldagent.envs.racing.world import (
     HALF_WIDTH,
     MAX_EXTENT,
@@ -43,9 +44,6 @@ from worldagent.envs.racing.world import (
     pixel_centres,
 )
 
-CHECKPOINTS = 12
-MAX_ITERATIONS = 2500  # upstream's no_freeze
-START_ALPHA = 2 * math.pi * (-0.5) / CHECKPOINTS
 RING = 1024  # steps kept: a lap is 218-389 steps on the dataset, at most ~700 for any checkpoint set in the box
 TWO_PI = 2 * math.pi
 RAD_RANGE = (TRACK_RAD / 3, TRACK_RAD)  # upstream's draw of a free checkpoint's radius

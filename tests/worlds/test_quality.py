@@ -119,7 +119,7 @@ def healthy() -> tuple[dict, dict]:
     [
         (lambda r, m: m["latent"].update(active_units=1), "collapsed: 1 of 5"),
         (lambda r, m: m["latent"].update(kl_total=0.0087), "collapsed:"),
-        (lambda r, m: r["vae"].update(nll_per_world=49.9), "overfit: held-out reconstruction no better than the mean world"),
+        (lambda r, m: r["vae"].update(nll_per_world=49.9), "underfit: held-out reconstruction no better than the mean world"),
         (lambda r, m: m["sensitivity"].update(mean_changed_world_share=0.01), "inert:"),
         (lambda r, m: m.update(coverage_distinct_worlds=81), "inert:"),
         (lambda r, m: m["structure"]["walls"].update(spread_ratio=0.3), "narrow: walls spreads under G(z) 30% as wide"),
@@ -136,6 +136,13 @@ def test_each_warning_fires_on_its_own_symptom(change, starts):
     warnings = diagnose(recon, measured, 10_000)
     assert len(warnings) == 1 and warnings[0].startswith(starts), warnings
     assert any(fix in warnings[0] for fix in ("--free-bits", "--repair", "--epochs"))  # each names its fix
+
+
+def test_a_poor_held_out_fit_is_overfit_when_the_training_worlds_decode_well():
+    recon, measured = healthy()
+    recon["vae"]["nll_per_world"] = 60.0  # worse than the mean world's 50
+    assert diagnose(recon, measured, 10_000, training_nll=20.0)[0].startswith("overfit:")
+    assert diagnose(recon, measured, 10_000, training_nll=55.0)[0].startswith("underfit:")
 
 
 def test_distinct_decodes_are_judged_against_what_the_dataset_allows():

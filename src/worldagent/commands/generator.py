@@ -78,7 +78,7 @@ def quality_figures(directory: Path, samples: int, seed: int) -> dict:
         "reconstruction": recon,
         data.env: measured,
         "training": {"epochs": len(vae.history), "final": vae.history[-1]},
-        "warnings": diagnose(recon, measured, len(data)),
+        "warnings": diagnose(recon, measured, len(data), vae.history[-1]["nll"]),
     }
 
 

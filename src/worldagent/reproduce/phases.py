@@ -156,7 +156,7 @@ def generator_phase(ctx: EnvContext) -> dict:
     train, held = split_holdout(len(data), config.holdout, config.seed)
     recon = reconstruction(generator, data, held, train)
     measured = figures(generator, data, QUALITY_SAMPLES, jax.random.key(ctx.seed))
-    warnings = diagnose(recon, measured, len(data))  # collapsed, inert or narrow: the report shows them
+    warnings = diagnose(recon, measured, len(data), vae.history[-1]["nll"])  # collapsed, inert or narrow: the report shows them
     quality = {
         "env": ctx.env,
         "worlds": len(data),

@@ -311,6 +311,7 @@ def figures(generator: Generator, dataset: WorldDataset, samples: int, key: jax.
 
 # -- warnings ---------------------------------------------------------------------------------
 # Each threshold flags a generator that search cannot use, not one that is merely imperfect.
+OVERFIT_RATIO = 0.5  # training worlds decoded with under half the held-out NLL: the VAE memorised them
 MIN_ACTIVE_UNITS = 2  # one active dimension is a dial, not a space: search has one direction to move in
 MIN_KL_NATS = float(np.log(2))  # under one bit of KL in all of z, the code cannot even split the dataset in two
 MIN_NLL_GAIN = 0.01  # held-out NLL within 1% of the mean world's: the decoder ignores z
@@ -320,23 +321,24 @@ MIN_SPREAD_RATIO = 0.5  # a descriptor's std under G(z) below half the dataset's
 RETRAIN = "retrain with a larger --free-bits (e.g. 1.0), a smaller --beta or more worlds"
 
 
-def _collapse(reconstruction: dict, latent: dict) -> list[str]:
+def _collapse(reconstruction: dict, latent: dict, training_nll: float | None) -> list[str]:
     units, kl = latent["active_units"], latent["kl_total"]
     dims = len(latent["kl_per_dim"])
     out = []
     if units < MIN_ACTIVE_UNITS or kl < MIN_KL_NATS:
         out.append(f"collapsed: {units} of {dims} latent dimensions active, KL {kl:.3g} nats in all; G(z) barely depends on z — {RETRAIN}.")
     vae, mean = reconstruction["vae"]["nll_per_world"], reconstruction["mean_image"]["nll_per_world"]
-    if vae > (1 - MIN_NLL_GAIN) * mean and out:
+    if vae <= (1 - MIN_NLL_GAIN) * mean:
+        return out
+    said = f"held-out reconstruction no better than the mean world (NLL {vae:.1f} vs {mean:.1f} nats per world)"
+    if out:
+        out.append(f"collapsed: {said}: z tells the decoder nothing it can use — {RETRAIN}, or train longer.")
+    elif training_nll is not None and training_nll < OVERFIT_RATIO * vae:  # z in use and training worlds decoded well: memorised
         out.append(
-            f"collapsed: reconstruction no better than the mean world (held-out NLL {vae:.1f} vs {mean:.1f} nats per world): "
-            f"z tells the decoder nothing it can use — {RETRAIN}, or train longer."
+            f"overfit: {said}, training NLL {training_nll:.1f}: the VAE memorised its training worlds — train fewer --epochs or on more worlds."
         )
-    elif vae > (1 - MIN_NLL_GAIN) * mean:  # z in use, yet held-out worlds decode worse than the mean world: memorised
-        out.append(
-            f"overfit: held-out reconstruction no better than the mean world (NLL {vae:.1f} vs {mean:.1f} nats per world) though "
-            f"{units} of {dims} latent dimensions are in use: the VAE memorised its training worlds — train fewer --epochs or on more worlds."
-        )
+    else:
+        out.append(f"underfit: {said} though {units} of {dims} latent dimensions are in use — train longer (more --epochs).")
     return out
 
 
@@ -366,12 +368,13 @@ def _narrow(structure: dict) -> list[str]:
     return out
 
 
-def diagnose(reconstruction: dict, figures: dict, worlds: int) -> list[str]:
+def diagnose(reconstruction: dict, figures: dict, worlds: int, training_nll: float | None = None) -> list[str]:
     """One-line warnings, each naming its fix, for a generator search cannot use (empty: none).
 
     Collapsed: fewer than ``MIN_ACTIVE_UNITS`` active dimensions or under ``MIN_KL_NATS`` of KL
     (and then also a held-out reconstruction within ``MIN_NLL_GAIN`` of the mean world's). Overfit:
-    that poor a held-out reconstruction while z is in use (the training worlds were memorised). Inert: a ±1 move
+    that poor a held-out reconstruction while z is in use and the training worlds decode well
+    (training NLL under ``OVERFIT_RATIO`` of the held-out); underfit: neither decodes well yet. Inert: a ±1 move
     along z changes under ``MIN_CHANGED_WORLD_SHARE`` of worlds, or the draws hold under
     ``MIN_DISTINCT_SHARE`` distinct worlds. Narrow: a descriptor whose std under G(z) is below
     ``MIN_SPREAD_RATIO`` of the dataset's.
@@ -380,5 +383,6 @@ def diagnose(reconstruction: dict, figures: dict, worlds: int) -> list[str]:
         reconstruction: ``reconstruction``'s figures.
         figures: ``figures``' figures (with ``latent``, ``sensitivity`` and ``structure``).
         worlds: the dataset's size (caps how many distinct worlds a nearest-world repair can give).
+        training_nll: the last epoch's NLL per training world (tells overfit from underfit), if known.
     """
-    return _collapse(reconstruction, figures["latent"]) + _inert(figures, worlds) + _narrow(figures["structure"])
+    return _collapse(reconstruction, figures["latent"], training_nll) + _inert(figures, worlds) + _narrow(figures["structure"])

@@ -52,7 +52,8 @@ def test_a_rejected_draw_is_projected_to_an_accepted_one():
     noise, rad = walker.draws([np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))])
     rejected = open_repair.to_unit(jnp.asarray(noise, jnp.float32), jnp.asarray(rad, jnp.float32))
     accepted = jnp.full_like(rejected, 0.3)  # a set the walker accepts, batched with it
-    unit = jnp.concatenate([rejected, accepted])
+    centre = jnp.full_like(rejected, 0.5)  # where every projection ends: the walker must accept it
+    unit = jnp.concatenate([rejected, accepted, centre])
     lines, used, accepted = jax.jit(open_repair.project)(unit)  # the walker rejects row 0 as upstream does (test_walker.py)
     assert accepted.all()
     assert 0 < np.abs(np.asarray(used[0] - unit[0])).max() < 0.5  # moved, towards the centre, not to it

@@ -110,4 +110,7 @@ def test_reproduce_tiny_has_a_toy_report_section(toy, tmp_path):
     assert math.isfinite(numbers[f"{toy.name}.random.mean_raw"])
     assert 0.0 <= numbers[f"{toy.name}.random.mean_normalised"] <= 1.0
     atlas = re.search(r'<section id="atlas">(.*?)</section>', html, re.S).group(1)
-    assert "skipped: the preset&#x27;s atlas_budget is 0" in atlas  # no atlas budget: the phase says so
+    # no atlas budget: the phase says so, and where to set one
+    assert f"skipped: {toy.name}&#x27;s preset &#x27;tiny&#x27; gives atlas_budget 0" in atlas
+    assert "EnvSpec.presets[&#x27;tiny&#x27;][&#x27;atlas_budget&#x27;]" in atlas
+    assert any("atlas: done" in line and "set EnvSpec.presets['tiny']['atlas_budget'] to run it" in line for line in lines)

@@ -297,6 +297,14 @@ def strategic_phase(ctx: EnvContext) -> dict:
     }
 
 
+def skipped_for_budget(ctx: EnvContext, budget: str) -> dict:
+    """A phase's record when its budget is 0: it says so, and where to set the budget (a preset an env
+    package copied without it skips the phase; issue 42)."""
+    why = f"{ctx.env}'s preset {ctx.preset.name!r} gives {budget} 0"
+    fix = f"set EnvSpec.presets[{ctx.preset.name!r}][{budget!r}] to run it"
+    return {"skipped": f"{why}; {fix}", "summary": f"skipped: {why} ({fix})"}
+
+
 def compare_names(ctx: EnvContext, optimisers=OPTIMISERS) -> dict[str, list[str]]:
     """Store names of the comparison campaigns, by optimiser."""
     from worldagent import experiments
@@ -308,7 +316,7 @@ def compare_phase(ctx: EnvContext) -> dict:
     """ES against BO against random search, all minimising reward (§6.1.3, Figure 7)."""
     budgets = ctx.budgets
     if budgets.compare_budget < 1:
-        return {"skipped": "the preset's compare_budget is 0", "summary": "skipped (compare_budget 0)"}
+        return skipped_for_budget(ctx, "compare_budget")
     from worldagent import experiments
     from worldagent.reports.comparison import comparison_figure
 
@@ -395,7 +403,7 @@ def atlas_phase(ctx: EnvContext) -> dict:
     and importance sampling)."""
     budgets, layout, spec = ctx.budgets, ctx.layout, ctx.spec
     if budgets.atlas_budget < 1:
-        return {"skipped": "the preset's atlas_budget is 0", "summary": "skipped (atlas_budget 0)"}
+        return skipped_for_budget(ctx, "atlas_budget")
     from worldagent import experiments
     from worldagent.reports.atlas import atlas_figure, counterfactual_figure
 

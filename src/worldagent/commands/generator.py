@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import typer
@@ -56,6 +57,14 @@ def train_generator(
     vae = train_vae(data, config, progress=progress, checkpoint_dir=out)
     save_generator(out, vae, dataset_path, build_generator(vae, data, repair=repaired, repair_name=repair_name))
     return vae, dict(repaired.config)
+
+
+def trained_epochs(directory: Path) -> int:
+    """Epochs of the VAE checkpoint in ``directory`` (0 when it holds none)."""
+    try:
+        return len(json.loads((Path(directory) / "vae.json").read_text()).get("history", []))
+    except (OSError, ValueError):
+        return 0
 
 
 def quality_figures(directory: Path, samples: int, seed: int) -> dict:
@@ -157,9 +166,12 @@ def register(app: typer.Typer) -> None:
         check_counts(caps={"n": DATASET_CAP}, n=n)
         check_seed(seed)
         check_writable(out, folder=True)
+        epochs_before = trained_epochs(out)
         vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet, repair_name=repair_name)
         last = vae.history[-1]
         repair_note = (repair_name or registry.get(env).default_repair) + "".join(f", {name}={value}" for name, value in used.items())
+        if epochs_before >= len(vae.history):  # a finished VAE is reused as it is (a new repair costs no training)
+            console.print(f"reused the VAE already trained in {out} ({epochs_before} epochs); only the repair was rebuilt (another --out retrains)")
         console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}; repair: {repair_note}")
         quality = quality_figures(out, TRAIN_SAMPLES, 0)  # a quick look (~1,000 decodes); `generator report` measures more
         console.print(key_figures(quality), highlight=False)

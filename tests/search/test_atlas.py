@@ -12,7 +12,7 @@ from worldagent import experiments
 from worldagent.cli import app
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.search.atlas import Grid, archive_of, atlas_names, cell_of, check_descriptors, distinct_count, read_atlas
+from worldagent.search.atlas import Grid, archive_of, atlas_names, cell_of, check_descriptors, distinct_count, grid_ranges, read_atlas
 from worldagent.store import RunStore
 
 GRID = Grid(("a", "b"), (2, 3), ((0.0, 1.0), (0.0, 3.0)))
@@ -155,3 +155,12 @@ def test_failures_are_explained_by_nearest_passing_worlds_and_groups(tmp_path, r
         np.testing.assert_array_equal(failure.mask(outcomes), [True, False])
         assert len(scored_keys(pair["seed"], 2)) == 2
     assert counterfactual_figure(setup, explained["pairs"], tmp_path / "pairs.png").stat().st_size > 10_000
+
+
+def test_a_descriptor_constant_on_decoded_worlds_is_refused_with_where_to_look():
+    def describe(z):  # the first descriptor varies with z; the second is 0 on every decoded world
+        return np.stack([z[:, 0], np.zeros(len(z))], axis=1)
+
+    assert grid_ranges(lambda z: describe(z)[:, :1], 3, ["x"])[0][0] < 0
+    with pytest.raises(WorldagentError, match=r"'wall_count' is 0 on all 512 worlds G\(z\) decoded.*worldagent check ENV --generator DIR"):
+        grid_ranges(describe, 3, ["x", "wall_count"])

@@ -114,7 +114,10 @@ def grid_ranges(describe: Callable, dim: int, names: Sequence[str], seed: int = 
     low, high = values.min(axis=0), values.max(axis=0)
     for name, lo, hi in zip(names, low, high):
         if not hi > lo:
-            raise WorldagentError(f"descriptor {name!r} is {lo:g} on every sampled world; pick one that varies.")
+            raise WorldagentError(
+                f"descriptor {name!r} is {lo:g} on all {RANGE_SAMPLES} worlds G(z) decoded from prior latents; pick one that varies "
+                "(`worldagent check ENV --generator DIR` checks every descriptor on decoded worlds; `generator report DIR` says if G(z) collapsed)."
+            )
     return tuple((float(lo), float(hi)) for lo, hi in zip(low, high))
 
 

@@ -105,3 +105,24 @@ def test_normalised_return_bounds():
     assert (low, high) == (-360.0, 100.0)
     np.testing.assert_allclose(normalised_return(np.array([-400.0, -360.0, -300.2, 100.0, 60.0])), [0, 0, 0.13, 1, 0.9130434], atol=1e-3)
     assert float(normalised_return(jax.numpy.array(-130.0))) == pytest.approx(0.5)
+
+
+def test_keep_every_keeps_loadable_agents_along_the_way(tmp_path, racing_spec, racing_pool, tiny_ppo):
+    from worldagent.agents.loaders import load_agent
+
+    with pytest.raises(WorldagentError, match="keep_every=0; pass a positive number"):
+        train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / "bad", keep_every=0, progress=False)
+    assert not (tmp_path / "bad").exists()  # refused before anything is written
+    result = train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / "kept", seed=3, progress=False, chunk_updates=1, keep_every=16)
+    kept = sorted((tmp_path / "kept" / training.SNAPSHOTS_DIR).iterdir(), key=lambda p: int(p.name))
+    counts = [int(p.name) for p in kept]
+    assert len(kept) >= 3 and counts[-1] == result.episodes  # the last chunk passed a multiple of 16 too
+    assert len({c // 16 for c in counts}) == len(counts)  # one per multiple of 16 passed
+    leaves = lambda params: [np.asarray(x) for x in jax.tree_util.tree_leaves(params)]  # noqa: E731
+    for folder, count in zip(kept, counts):
+        agent = load_agent(racing_spec, folder)  # what --agent takes: diff, evaluate, explore
+        assert agent is not None and training.load_policy(folder, env="racing").extra["episodes"] == count
+    first, last = (leaves(training.load_policy(kept[i], env="racing").params) for i in (0, -1))
+    assert any(not np.array_equal(a, b) for a, b in zip(first, last))  # an earlier agent, not the final one again
+    for a, b in zip(last, leaves(result.agent.params)):
+        np.testing.assert_array_equal(a, b)

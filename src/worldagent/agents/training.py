@@ -8,7 +8,9 @@ appends the learning curve (``curve.csv``; ``curve.png`` at the end) and writes 
 ``CHECKPOINT_SECONDS`` and when the loop stops (done, ``stop_after_chunks``, an exception or
 Ctrl-C). A killed run started again on the same ``out_dir`` with ``resume=True`` continues
 from its last checkpoint and ends where the uninterrupted run would have. At the end the agent is saved to
-``out_dir/policy`` (``saved.save_policy``).
+``out_dir/policy`` (``saved.save_policy``). With ``keep_every=N`` the agent is also kept as it was
+each time training passes a multiple of N episodes, in ``out_dir/snapshots/<episodes>/`` (a policy
+directory ``--agent`` loads, e.g. for ``worldagent diff`` of two checkpoints).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ RUN_FILE = "run.json"
 CURVE_FILE = "curve.csv"
 PLOT_FILE = "curve.png"
 CURRICULUM_PLOT_FILE = "curriculum.png"
+SNAPSHOTS_DIR = "snapshots"  # out_dir/snapshots/<episodes>/: the agent kept every keep_every episodes
 # A DQN state holds its replay buffer (~94 MB for harvest): written after every chunk, it took
 # a third of the quick preset's harvest training. A kill loses at most this much training.
 CHECKPOINT_SECONDS = 30.0
@@ -143,12 +146,12 @@ def _status(spec, row: dict) -> dict:
     return {name[:12]: row[name] for name in plotted_metrics(spec, row)}
 
 
-def _save_agent(out_dir: Path, spec, algorithm, trainer, state, env, config, extra: dict) -> SavedPolicy:
-    """Write the trained agent to ``out_dir/policy`` and read it back."""
+def _save_agent(folder: Path, spec, algorithm, trainer, state, env, config, extra: dict) -> SavedPolicy:
+    """Write the trained agent to the policy directory ``folder`` and read it back."""
     if hasattr(config, "act_epsilon"):  # Q-network agents act as they were trained to (see dqn.DQNConfig)
         extra = {**extra, "act_epsilon": float(config.act_epsilon)}
     save_policy(
-        out_dir / POLICY_DIR,
+        folder,
         trainer.network,
         state.params,
         kind=algorithm.network_kind,
@@ -160,7 +163,7 @@ def _save_agent(out_dir: Path, spec, algorithm, trainer, state, env, config, ext
         training=config.to_dict(),
         extra=extra,
     )
-    return load_policy(out_dir / POLICY_DIR, env=spec.name)
+    return load_policy(folder, env=spec.name)
 
 
 def _run_record(spec, algo: str, config, options: dict, seed: int, distribution_spec: str) -> dict:
@@ -296,15 +299,32 @@ def status(run: OpenRun) -> dict:
     return _status(run.spec, run.rows[-1]) if run.rows else {}
 
 
+def save_run_agent(run: OpenRun, folder: Path) -> SavedPolicy:
+    """Save the run's agent as it is now to the policy directory ``folder`` (its episodes, steps, seed recorded)."""
+    state = run.state
+    extra = {"seed": run.record["seed"], "episodes": int(state.episodes), "env_steps": int(state.env_steps), "updates": int(state.update)}
+    extra = {**extra, "distribution": run.record["distribution"], "options": run.record["options"]}
+    return _save_agent(folder, run.spec, run.algorithm, run.trainer, state, run.env, run.config, extra)
+
+
+def keep_snapshot(run: OpenRun, before: int, every: int | None) -> Path | None:
+    """After a chunk that took the run from ``before`` episodes past a multiple of ``every``: the agent
+    saved to ``out_dir/snapshots/<episodes>/`` (its path), else None."""
+    episodes = int(run.state.episodes)
+    if not every or episodes // every == before // every:
+        return None
+    folder = run.out_dir / SNAPSHOTS_DIR / str(episodes)
+    save_run_agent(run, folder)
+    return folder
+
+
 def finish_run(run: OpenRun, wall: float) -> TrainResult:
     """Plot the curve, save the agent to ``out_dir/policy`` and say what the run produced."""
-    state, rows, seed = run.state, run.rows, run.record["seed"]
+    state, rows = run.state, run.rows
     if rows:
         plot_curve(rows, run.out_dir / PLOT_FILE, run.spec)
     _plot_curriculum(run)
-    extra = {"seed": seed, "episodes": int(state.episodes), "env_steps": int(state.env_steps), "updates": int(state.update)}
-    extra = {**extra, "distribution": run.record["distribution"], "options": run.record["options"]}
-    agent = _save_agent(run.out_dir, run.spec, run.algorithm, run.trainer, state, run.env, run.config, extra)
+    agent = save_run_agent(run, run.out_dir / POLICY_DIR)
     columns = list(rows[0]) if rows else list(HOST_FIELDS)
     curve = {k: np.array([r[k] for r in rows]) for k in columns}
     return TrainResult(agent, run.out_dir, curve, int(state.episodes), int(state.env_steps), wall, run.resumed_from)
@@ -337,6 +357,7 @@ def train(
     distribution_spec: str = "",
     stop_after_chunks: int | None = None,
     chunk_updates: int | None = None,
+    keep_every: int | None = None,
 ) -> TrainResult:
     """Train an agent on a world distribution, with checkpoints, a learning curve and the saved agent.
 
@@ -364,10 +385,15 @@ def train(
         chunk_updates: updates per jitted chunk, the curve written after each (default: the
             config's ``chunk_updates``; DQN: one episode of every env); the checkpoint every
             ``CHECKPOINT_SECONDS`` and at the stop.
+        keep_every: also keep the agent each time training passes a multiple of this many
+            episodes, in ``out_dir/snapshots/<episodes>/`` (``<episodes>``: the count at the end of
+            that chunk, so a multiple or just past one); None keeps only the final agent.
 
     Returns:
         ``TrainResult``.
     """
+    if keep_every is not None and (isinstance(keep_every, bool) or not isinstance(keep_every, (int, np.integer)) or keep_every < 1):
+        raise WorldagentError(f"keep_every={keep_every!r}; pass a positive number of episodes (e.g. half the training budget), or None.")
     run = open_run(
         spec, algo, config, distribution, out_dir, seed=seed, options=options, params=params, resume=resume,
         distribution_spec=distribution_spec, chunk_updates=chunk_updates,
@@ -383,6 +409,7 @@ def train(
                 before = int(run.state.episodes)
                 state, curve = trainer.train_chunk(run.state, run.chunk_updates)
                 record_chunk(run, state, jax.device_get(curve), time.perf_counter() - start)
+                keep_snapshot(run, before, keep_every)
                 advance(min(int(state.episodes), total) - min(before, total), **status(run))
         finally:
             checkpoint(run)

@@ -55,6 +55,9 @@ def register(app: typer.Typer) -> None:
         option: list[str] = option_flag(),
         settings: list[str] = set_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the run."),
+        keep_every: int = typer.Option(
+            None, "--keep-every", help="Also keep the agent every N episodes in OUT/snapshots/<episodes>/ (an --agent for diff, evaluate, ...)."
+        ),
         resume: bool = typer.Option(True, "--resume/--restart", help="Continue from the run directory's checkpoint, or start over."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
     ) -> None:
@@ -72,6 +75,8 @@ def register(app: typer.Typer) -> None:
         check_training_episodes(episodes)
         check_seed(seed)
         check_writable(out, folder=True)
+        if keep_every is not None and keep_every < 1:
+            raise WorldagentError(f"--keep-every {keep_every}; pass a positive number of episodes, e.g. half of --episodes.")
         if worlds == "vae" and generator is None:
             raise WorldagentError("--worlds vae draws G(z): pass --generator DIR (from `worldagent generator train`).")
         config = training_config(spec, algo, episodes=episodes, options=options, **parse_settings(settings, [algo])[algo])
@@ -86,11 +91,14 @@ def register(app: typer.Typer) -> None:
         try:
             result = run_training(
                 spec, algo, config, schedule, out, seed=seed, options=options, progress=not quiet, resume=resume,
-                distribution_spec=worlds if curriculum == "dr" else f"{worlds}; curriculum {label(schedule)}",
+                distribution_spec=worlds if curriculum == "dr" else f"{worlds}; curriculum {label(schedule)}", keep_every=keep_every,
             )  # fmt: skip
         except KeyboardInterrupt:
             console.print(interrupted(out), highlight=False)
             raise typer.Exit(code=130) from None
         console.print(f"trained {algo} for {result.episodes:,} episodes ({result.env_steps:,} steps, {result.wall_seconds:.0f} s) -> {out}")
+        kept = sorted((out / "snapshots").glob("*/"), key=lambda p: int(p.name) if p.name.isdigit() else -1) if keep_every else []
+        if kept:
+            console.print(f"kept the agent at {len(kept)} points of training: {', '.join(str(p) for p in kept)}")
         if (out / "curriculum.png").is_file():
             console.print(f"the curriculum's buffer over training: {out / 'curriculum.png'} (snapshots in {out / 'curriculum'})")

@@ -51,9 +51,13 @@ def test_a_diff_directory_opens_with_its_two_agents_and_its_regressed_worlds(toy
     row = found["rows"][0]
     stored = toy.evaluations[row["index"]]
     assert np.mean([e["reached"] for e in stored.episodes]) < 0.5 <= np.mean([e["A.reached"] for e in stored.episodes])
-    for agent in found["agents"]:
-        played = client.post(f"/api/{toy_spec.name}/play", json={"world": row["index"], "agent": agent, "episodes": 2, "size": 64})
+    assert row["replay"]["episodes"] == len(stored.episodes) == 2
+    for agent, prefix in zip(found["agents"], ("A.", "")):
+        request = {"world": row["index"], "agent": agent, **row["replay"], "size": 64}  # the keys the diff scored the world with
+        played = client.post(f"/api/{toy_spec.name}/play", json=request)
         assert played.status_code == 200 and played.json()["agent"] == agent
+        assert played.json()["means"]["reached"] == pytest.approx(np.mean([e[prefix + "reached"] for e in stored.episodes]))
+    assert all(r["nearest_replay"]["episodes"] == 2 for r in found["rows"])
     bad = client.get(f"/api/{toy_spec.name}/diff", params={"campaign": "nope"})
     assert bad.status_code == 400 and f"diff campaigns of toy: {CAMPAIGN}" in bad.json()["error"]
 

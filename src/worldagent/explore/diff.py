@@ -6,7 +6,9 @@ The agents of every diff campaign in a run's store join the explorer's fixed lis
 ``diff/A`` and ``diff/B`` (``diff2/A`` ... for another pair), when ``load_agent`` can read them
 again (an agent built in Python cannot be). The view ranks the campaign's regressed worlds (B
 fails, A passes) by prior likelihood, each with its nearest stored world of that campaign where
-B passes; a click opens one in the World view with A and B as its two agents.
+B passes; a click opens one in the World view with A and B as its two agents, played with the
+very episode keys the diff scored it with (each row's ``replay``: the seed and episode count the
+World view's play takes), so the World view shows the episodes the table counts.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from worldagent.analysis.diff import regressed_ranking
 from worldagent.analysis.paired import failure_masks
 from worldagent.errors import WorldagentError
 from worldagent.events import parse_selection
+from worldagent.search.campaign import evaluation_seed
 
 LOADABLE = ("worldagent", "scripted", "onnx", "callable", "sb3")  # agent kinds ``load_agent`` reads from their recorded path
 
@@ -54,13 +57,26 @@ def diff_agents(campaigns: dict[str, dict]) -> dict[str, str]:
     return found
 
 
+def replay(evaluation: Any, campaign_seed: int) -> dict:
+    """{"seed", "episodes"}: what the World view's play takes to replay a stored world's own episodes
+    (its keys are ``split(key(seed), episodes)``, as the campaign played it)."""
+    return {"seed": evaluation_seed(campaign_seed, evaluation.generation, evaluation.slot), "episodes": len(evaluation.episodes)}
+
+
+def campaign_seed(run: Any, env: str, campaign: str) -> int:
+    """The seed campaign ``campaign`` of ``env``'s store was run with."""
+    with run.store(env) as store:
+        return next(int(c.seed) for c in store.campaigns() if c.name == campaign)
+
+
 def diff_view(session: Any, campaign: str | None, event: str | None, limit: int) -> dict:
     """The regressed worlds of diff campaign ``campaign`` (default: the first) under ``event`` (default: the env's failure).
 
     Returns:
         {"campaign", "campaigns", "agents": [label A, label B] (those loadable), "event", "worlds",
         "regressed", "improved", "rows": [{"index", "log_prior", "a", "b" ({metric: mean}),
-        "nearest_passing" (index or None), "distance"}]}.
+        "nearest_passing" (index or None), "distance", "replay", "nearest_replay" (``replay``'s
+        {"seed", "episodes"} of the world and of its nearest passing one, or None)}]}.
     """
     campaigns = diff_campaigns(session.run, session.env)
     if not campaigns:
@@ -79,6 +95,7 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
     fail_a, fail_b, a, b = failure_masks(evaluations, session.spec, selection)
     latents = session.latents[indices]
     shown = [m for m in dict.fromkeys((session.spec.metrics.main, *selection.metrics)) if m in a]
+    seed = campaign_seed(session.run, session.env, campaign)
     rows = []
     for row in regressed_ranking(fail_a, fail_b, latents, latents)[:limit]:
         k, near = row["world"], row["nearest_passing"]
@@ -90,6 +107,8 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
                 "b": {m: float(np.mean(b[m][k])) for m in shown},
                 "nearest_passing": None if near is None else indices[near],
                 "distance": row["distance"],
+                "replay": replay(evaluations[k], seed),
+                "nearest_replay": None if near is None else replay(evaluations[near], seed),
             }
         )
     loadable = diff_agents(campaigns)

@@ -95,7 +95,7 @@ class PlayRequest(WorldRequest):
 
     agent: str = Field(RUN_AGENT, max_length=100)
     episodes: int = Field(8, ge=1, le=MAX_EPISODES)
-    seed: int = Field(0, ge=0, lt=2**31)
+    seed: int = Field(0, ge=0, lt=2**32)  # a campaign's evaluation seeds (search.campaign.evaluation_seed) are uint32
     size: int = Field(384, ge=64, le=MAX_SIZE)
     client: str | None = Field(None, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
     seq: int = Field(0, ge=0, lt=2**53)

@@ -323,10 +323,16 @@ async function loadDiff() {
 }
 
 async function openDiff(index) {
-  // the World view with the diff's A and B as its two agents, played at once
+  // the World view with the diff's A and B as its two agents, played at once with the episode keys the diff scored
   const [a, b] = (state.diff && state.diff.agents) || [];
   if (a) $("agent").value = a;
   if (b) $("agent2").value = b;
+  const rows = (state.diff && state.diff.rows) || [];
+  const replay = rows.map((r) => (r.index === index ? r.replay : r.nearest_passing === index ? r.nearest_replay : null)).find((r) => r);
+  if (replay && replay.episodes <= Number($("episodes").max)) {  // other counts give other keys: left to the user then
+    $("seed").value = replay.seed;
+    $("episodes").value = replay.episodes;
+  }
   await openWorld(index);
   if (a || b) play();
 }

@@ -121,6 +121,11 @@ def parse_settings(texts: Iterable[str], algos: Iterable[str]) -> dict[str, dict
         hints = {algo: typing.get_type_hints(get_algorithm(algo).config_type) for algo in targets}
         having = [algo for algo in targets if field_name in hints[algo]]
         if not having:
+            elsewhere = [algo for algo in ALGORITHMS if field_name in typing.get_type_hints(ALGORITHMS[algo].config_type)]
+            if elsewhere:  # e.g. recurrent=lstm with acktr: say which algorithm has it
+                raise WorldagentError(
+                    f"--set {text!r}: {field_name!r} is a setting of {'/'.join(elsewhere)}; train with --algo {elsewhere[0]} or drop it."
+                )
             valid = sorted({f.name for algo in targets for f in dataclasses.fields(get_algorithm(algo).config_type)})
             raise WorldagentError(f"--set {text!r}: {'/'.join(targets)} has no setting {field_name!r}; valid: {', '.join(valid)}.")
         for algo in having:

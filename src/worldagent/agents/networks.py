@@ -12,6 +12,12 @@ gain √2 in hidden layers, 0.01 for the policy head (near-uniform initial polic
 value head. (A small CNN on the road window was tried: ~5× slower per step on CPU and it did
 not learn to drive within the budget either.)
 
+With ``recurrent`` ("lstm" or "gru") the actor-critic carries memory: a shared torso, a cell of
+``memory_size`` units, linear actor and critic heads (the UED papers' student for partially
+observed worlds: jaxued and minimax put a 256-unit LSTM after a small torso). Its call is
+``(obs, memory, first) -> (logits, value, memory)``; memory is zeroed where ``first`` (the
+observation starts an episode), so one scan over a segment that crosses episodes is exact.
+
 ``build_network(kind, config)`` rebuilds a module from its saved config (``policy.py``), so a
 saved agent names its architecture instead of pickling it.
 """
@@ -68,25 +74,41 @@ def check_flat_observation(shape: Sequence[int]) -> None:
         )
 
 
+CELLS = ("lstm", "gru")
+
+
+def initial_memory(cell: str, size: int, batch: tuple[int, ...] = ()) -> jax.Array | tuple[jax.Array, jax.Array]:
+    """Zero memory of a ``cell`` ("lstm": (c, h), each f32[*batch, size]; "gru": h f32[*batch, size])."""
+    zeros = jnp.zeros((*batch, size), jnp.float32)
+    return (zeros, zeros) if cell == "lstm" else zeros
+
+
 class ActorCritic(nn.Module):
-    """Categorical policy logits and a state value from a flat observation.
+    """Categorical policy logits and a state value from a flat observation, with or without memory.
 
     Attributes:
         num_actions: A, the number of discrete actions.
-        hidden: widths of the hidden layers of each torso.
+        hidden: widths of the hidden layers of each torso (recurrent: of the one shared torso).
         activation: "tanh" or "relu".
-        quadratic: both torsos read ``quadratic_features(obs)`` instead of ``obs`` (for short
+        quadratic: the torsos read ``quadratic_features(obs)`` instead of ``obs`` (for short
             observations only: D inputs become D + D(D+1)/2).
+        recurrent: None (memoryless: two MLPs), "lstm" or "gru" (see the module docstring).
+        memory_size: M, units of the recurrent cell (ignored without ``recurrent``).
     """
 
     num_actions: int
     hidden: Sequence[int] = (128, 128)
     activation: str = "tanh"
     quadratic: bool = False
+    recurrent: str | None = None
+    memory_size: int = 256
 
     @nn.compact
-    def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """obs [..., D] (any dtype; cast to f32) -> (logits f32[..., A], value f32[...]).
+    def __call__(self, obs: jax.Array, memory=None, first=None):
+        """Memoryless: obs [..., D] (any dtype; cast to f32) -> (logits f32[..., A], value f32[...]).
+
+        Recurrent: ``(obs [..., D], memory, first bool[...]) -> (logits, value, memory)`` with
+        memory f32[..., M] (LSTM: a pair); ``memory=None`` is a fresh episode's.
 
         Initialise with one observation f32[D] (as PPO and ACKTR do): an observation of another
         shape is refused there, in one line, instead of failing later inside a trainer.
@@ -95,9 +117,29 @@ class ActorCritic(nn.Module):
             check_flat_observation(obs.shape)
         x = obs.astype(jnp.float32)
         x = quadratic_features(x) if self.quadratic else x
+        if self.recurrent is not None:
+            return self._recurrent(x, memory, first)
         logits = MLP(tuple(self.hidden), self.num_actions, 0.01, self.activation, name="actor")(x)
         value = MLP(tuple(self.hidden), 1, 1.0, self.activation, name="critic")(x)
         return logits, value[..., 0]
+
+    def _recurrent(self, x: jax.Array, memory, first):
+        """Shared torso -> cell (memory zeroed where ``first``) -> linear heads."""
+        if self.recurrent not in CELLS:
+            raise WorldagentError(f"ActorCritic.recurrent={self.recurrent!r}; use one of {', '.join(CELLS)} (or None for no memory).")
+        fresh = initial_memory(self.recurrent, self.memory_size, x.shape[:-1])
+        if memory is None:
+            memory = fresh
+        elif first is not None:  # an episode starts here: forget the last one
+            memory = jax.tree_util.tree_map(lambda zero, old: jnp.where(first[..., None], zero, old), fresh, memory)
+        act = ACTIVATIONS[self.activation]
+        for i, width in enumerate(self.hidden):
+            x = act(nn.Dense(width, kernel_init=nn.initializers.orthogonal(np.sqrt(2.0)), name=f"torso_{i}")(x))
+        cell = nn.OptimizedLSTMCell if self.recurrent == "lstm" else nn.GRUCell
+        memory, y = cell(self.memory_size, name="cell")(memory, x)
+        logits = nn.Dense(self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor")(y)
+        value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0), name="critic")(y)
+        return logits, value[..., 0], memory
 
 
 class QNetwork(nn.Module):

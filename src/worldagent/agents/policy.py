@@ -6,7 +6,14 @@ can be passed into jitted, vmapped evaluation code::
     action = policy.act(policy.params, obs, key, state)     # pure JAX
 
 ``state`` (the env state) is only read by *privileged* scripted policies such as the racing
-reference driver; every other policy ignores it. Trained networks become policies with
+reference driver; every other policy ignores it.
+
+A policy may carry **memory** (a recurrent PPO agent): then ``initial_memory`` is a pytree (one
+episode's, e.g. an LSTM's (c, h) f32[M] each) and ``step(params, obs, key, state, memory) ->
+(action, memory)`` acts; a memoryless policy has ``initial_memory=None`` and no ``step``. Every
+loop plays both through ``envs.core.policy_step`` (its one adapter), starting each episode from
+``initial_memory``; a memoryless policy's memory stays None, so its keys and results are those
+of ``act``. Trained networks become policies with
 ``network_policy``; saved agents are read by ``saved.load_policy``, ``--agent`` strings by
 ``loaders.load_agent``. External agents (ONNX, Python callables, Stable-Baselines3) are
 ``external.HostPolicy`` values: numpy in, numpy out, stepped by the host evaluator.
@@ -23,6 +30,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 from flax import struct
+
+from worldagent.agents.networks import initial_memory
+from worldagent.errors import WorldagentError
 
 
 @dataclass(frozen=True)
@@ -68,6 +78,9 @@ class Policy:
         name: what it is, for reports (static).
         privileged: True when ``act`` reads the env ``state`` (scripted drivers) (static).
         source: where the agent came from (``AgentSource``; None for agents built in Python) (static).
+        initial_memory: the memory an episode starts with (a pytree), or None: memoryless.
+        step: ``step(params, obs, key, state, memory) -> (action, memory)`` of a policy with
+            memory (static); None: memoryless.
     """
 
     params: Any
@@ -75,6 +88,8 @@ class Policy:
     name: str = struct.field(pytree_node=False, default="policy")
     privileged: bool = struct.field(pytree_node=False, default=False)
     source: AgentSource | None = struct.field(pytree_node=False, default=None)
+    initial_memory: Any = None
+    step: Callable | None = struct.field(pytree_node=False, default=None)
 
 
 def network_act(module, kind: str, greedy: bool = False, num_agents: int = 1, epsilon: float = 0.0) -> Callable:
@@ -103,7 +118,31 @@ def network_act(module, kind: str, greedy: bool = False, num_agents: int = 1, ep
     return act
 
 
+def recurrent_step(module, greedy: bool = False) -> Callable:
+    """``step(params, obs, key, state, memory) -> (action, memory)`` of a recurrent actor-critic
+    (``networks.ActorCritic`` with ``recurrent``): sample its categorical, or argmax when ``greedy``."""
+
+    def step(params, obs, key, state, memory):
+        del state
+        logits, _, memory = module.apply(params, obs, memory)
+        action = jnp.argmax(logits, axis=-1) if greedy else jax.random.categorical(key, logits)
+        return action.astype(jnp.int32), memory
+
+    return step
+
+
+def memoryless_only(params, obs, key, state=None):
+    """The ``act`` of a policy with memory: refused, as acting without its memory would be wrong."""
+    raise WorldagentError("this policy carries memory (a recurrent agent); step it with envs.core.policy_step, which threads its memory.")
+
+
 def network_policy(module, params, kind: str, greedy: bool = False, num_agents: int = 1, name: str | None = None, epsilon: float = 0.0) -> Policy:
-    """A trained network as a ``Policy`` (see ``network_act``)."""
+    """A trained network as a ``Policy`` (see ``network_act``; ``recurrent_step`` for an actor-critic with memory)."""
     mode = "stochastic" if kind == "actor_critic" and not greedy else (f"epsilon {epsilon:g}" if epsilon > 0 else "greedy")
-    return Policy(params, network_act(module, kind, greedy, num_agents, epsilon), name or f"{kind} ({mode})")
+    cell = getattr(module, "recurrent", None)
+    if cell is None:
+        return Policy(params, network_act(module, kind, greedy, num_agents, epsilon), name or f"{kind} ({mode})")
+    if num_agents != 1:
+        raise WorldagentError(f"a recurrent {kind} is a single agent's; this one has {num_agents} stacked: save each agent's network on its own.")
+    memory = initial_memory(cell, module.memory_size)
+    return Policy(params, memoryless_only, name or f"{kind} {cell} ({mode})", initial_memory=memory, step=recurrent_step(module, greedy))

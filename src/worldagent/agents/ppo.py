@@ -8,6 +8,11 @@ so episodes, not env steps, are what is counted.
     state, curve = trainer.train(key)                       # the whole run, one jitted call
     states, curves = jax.vmap(trainer.train)(keys)          # several seeds at once
 
+With ``recurrent="lstm"`` (or "gru") the actor-critic carries memory (``networks.ActorCritic``):
+the runner holds each env's memory, the rollout resets it where an episode starts, and the learner
+replays each env's whole segment through the cell from the memory it began with (minibatches of
+envs, as PureJaxRL's recurrent PPO and jaxued's students).
+
 The host driver (``training.train``) calls ``train_chunk(state, n)`` a few updates at a time.
 The curve has one row per update: the training statistics and the mean of every per-episode
 entry of the env's step ``info`` over the episodes that ended (racing: crashed, lap_completed,
@@ -26,7 +31,7 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
-from worldagent.agents.networks import ActorCritic
+from worldagent.agents.networks import CELLS, ActorCritic, initial_memory
 from worldagent.agents.rollouts import EnvRunner, action_log_prob, collect, entropy, episode_summary, gae, init_runner, score_segment
 from worldagent.agents.trainer import Trainer, budgeted_trainer, curve_row, raw_key
 from worldagent.configs import JsonConfig
@@ -72,6 +77,12 @@ class PPOConfig(JsonConfig):
             penalty ramps linearly from 0 to its value, where its spec has one (racing: the crash
             penalty); 0: the full penalty from the start. Evaluation always pays the full penalty.
         quadratic: the networks read the observation and its pairwise products (``networks.py``).
+        recurrent: None (an MLP, memoryless), "lstm" or "gru": the actor-critic carries memory
+            (``networks.ActorCritic``), for worlds the agent sees only in part. The learner then
+            replays whole segments through the cell from the memory each began with, so
+            minibatches are sets of envs (``num_minibatches`` must divide ``num_envs``) and
+            ``hidden`` is the one torso before the cell.
+        memory_size: M, units of the recurrent cell (jaxued's and minimax's student: 256).
     """
 
     total_episodes: int = 10_000
@@ -94,9 +105,11 @@ class PPOConfig(JsonConfig):
     respawn: bool = False
     crash_warmup: float = 0.0
     quadratic: bool = False
+    recurrent: str | None = None
+    memory_size: int = 256
 
     def __post_init__(self):
-        for name in ("total_episodes", "num_envs", "num_steps", "update_epochs", "num_minibatches"):
+        for name in ("total_episodes", "num_envs", "num_steps", "update_epochs", "num_minibatches", "memory_size"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise WorldagentError(f"PPOConfig.{name}={value!r}; it must be a positive integer.")
@@ -120,6 +133,17 @@ class PPOConfig(JsonConfig):
         if self.activation not in ("tanh", "relu"):
             raise WorldagentError(f"PPOConfig.activation={self.activation!r}; use 'tanh' or 'relu'.")
         object.__setattr__(self, "hidden", tuple(self.hidden))
+        self._check_recurrent()
+
+    def _check_recurrent(self) -> None:
+        """``recurrent`` names a cell, and minibatches split the envs (sequences are not cut)."""
+        if self.recurrent not in (None, *CELLS):
+            raise WorldagentError(f"PPOConfig.recurrent={self.recurrent!r}; use {' or '.join(CELLS)} (or none for a memoryless MLP).")
+        if self.recurrent and self.num_envs % self.num_minibatches:
+            raise WorldagentError(
+                f"recurrent PPO splits its {self.num_envs} envs into {self.num_minibatches} minibatches of whole sequences; "
+                "pick num_minibatches dividing num_envs."
+            )
 
 
 @struct.dataclass
@@ -198,23 +222,27 @@ def single_agent_trainer(name: str, config_type: type, core, config, env, env_pa
 def _core(config: PPOConfig, env, training_params):
     """``init(key, consts)``, ``update(state, consts)`` and the network; consts = (env_params, distribution).
     Cached, so trainers of the same config, env and ``training_params`` share their compilation."""
-    network = ActorCritic(env.num_actions, config.hidden, config.activation, config.quadratic)
+    network = ActorCritic(env.num_actions, config.hidden, config.activation, config.quadratic, config.recurrent, config.memory_size)
     tx = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.scale_by_adam(eps=1e-5))
     batch = config.num_envs * config.num_steps
-    minibatch = batch // config.num_minibatches
+    # a minibatch: steps of the flattened segment (MLP), or whole sequences of some envs (recurrent)
+    rows = config.num_envs if config.recurrent else batch
+    forward, learner_data = (_sequence_forward(network), _sequences) if config.recurrent else (network.apply, _steps)
 
     def init(key: jax.Array, consts) -> TrainState:
         params_env, distribution = consts
         key_net, key_env, key_run = jax.random.split(key, 3)
         params = network.init(key_net, jnp.zeros(env.observation_shape, jnp.float32))
         runner = init_runner(key_env, env, training_params(params_env, config, jnp.float32(0.0)), distribution, config.num_envs)
+        if config.recurrent:
+            runner = runner.replace(memory=initial_memory(config.recurrent, config.memory_size, (config.num_envs,)))
         zero = jnp.int32(0)
         return TrainState(params, tx.init(params), runner, raw_key(key_run), zero, zero, zero)
 
     def loss_fn(params, batch_data):
-        obs, action, old_log_prob, old_value, advantage, target, *weight = batch_data  # weight: robust PLR's
+        inputs, action, old_log_prob, old_value, advantage, target, *weight = batch_data  # weight: robust PLR's
         mean = (lambda x: x.mean()) if not weight else (lambda x: jnp.sum(weight[0] * x) / jnp.maximum(weight[0].sum(), 1.0))  # noqa: E731
-        logits, value = network.apply(params, obs)
+        logits, value = forward(params, inputs)
         log_prob = action_log_prob(logits, action)
         ratio = jnp.exp(log_prob - old_log_prob)
         centred = advantage - mean(advantage)
@@ -234,11 +262,11 @@ def _core(config: PPOConfig, env, training_params):
         """``update_epochs`` passes of minibatch Adam steps over one update's data."""
 
         def epoch(carry, key_epoch):
-            order = jax.random.permutation(key_epoch, batch).reshape(config.num_minibatches, minibatch)
+            order = jax.random.permutation(key_epoch, rows).reshape(config.num_minibatches, rows // config.num_minibatches)
 
             def minibatch_step(carry, index):
                 params, opt_state = carry
-                grads, aux = jax.grad(loss_fn, has_aux=True)(params, tuple(x[index] for x in data))
+                grads, aux = jax.grad(loss_fn, has_aux=True)(params, jax.tree_util.tree_map(lambda x: x[index], data))
                 updates, opt_state = tx.update(grads, opt_state, params)
                 params = optax.apply_updates(params, jax.tree_util.tree_map(lambda u: -lr * u, updates))
                 return (params, opt_state), aux
@@ -255,10 +283,8 @@ def _core(config: PPOConfig, env, training_params):
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)
         runner, weights = score_segment(distribution, runner, traj, targets)
-        flat = lambda x: x.reshape(batch, *x.shape[2:])  # noqa: E731
-        data = tuple(
-            map(flat, (traj.obs, traj.action, traj.log_prob, traj.value, advantages, targets) + ((weights,) if is_robust(distribution) else ()))
-        )
+        per_step = (traj.action, traj.log_prob, traj.value, advantages, targets) + ((weights,) if is_robust(distribution) else ())
+        data = learner_data(state.runner, traj, per_step)
         lr = config.learning_rate * (1.0 - fraction) if config.anneal_lr else jnp.float32(config.learning_rate)
         (params, opt_state), aux = learn(state.params, state.opt_state, data, lr, key_perm)
         summary = episode_summary(traj)
@@ -270,3 +296,35 @@ def _core(config: PPOConfig, env, training_params):
         return new_state, row
 
     return init, update, network
+
+
+def _steps(runner: EnvRunner, traj, per_step: tuple) -> tuple:
+    """The MLP learner's data: the segment's B·T steps, flattened (minibatches of steps)."""
+    del runner
+    flat = lambda x: x.reshape(-1, *x.shape[2:])  # noqa: E731
+    return tuple(map(flat, (traj.obs, *per_step)))
+
+
+def _sequences(runner: EnvRunner, traj, per_step: tuple) -> tuple:
+    """The recurrent learner's data, env-major [B, T, ...] (minibatches of envs): the inputs
+    (obs, first, the memory each env began the segment with) and the per-step arrays."""
+    first = jnp.concatenate([(runner.episode_length == 0)[None], traj.done[:-1]])  # obs t starts an episode
+    env_major = lambda x: jnp.swapaxes(x, 0, 1)  # noqa: E731
+    return ((env_major(traj.obs), env_major(first), runner.memory), *map(env_major, per_step))
+
+
+def _sequence_forward(network):
+    """``forward(params, (obs [b, T, D], first bool[b, T], memory [b, ...])) -> (logits [b, T, A],
+    value [b, T])``: the segment replayed through the cell as the rollout played it."""
+
+    def forward(params, inputs):
+        obs, first, memory = inputs
+
+        def one_step(memory, step):
+            logits, value, memory = network.apply(params, step[0], memory, step[1])
+            return memory, (logits, value)
+
+        _, (logits, value) = jax.lax.scan(one_step, memory, (jnp.swapaxes(obs, 0, 1), jnp.swapaxes(first, 0, 1)))
+        return jnp.swapaxes(logits, 0, 1), jnp.swapaxes(value, 0, 1)
+
+    return forward

@@ -22,6 +22,10 @@ after the trainer has its value targets, ``score_segment`` scores every episode 
 the segment (mean positive value loss over its steps, or its target margin) and updates the
 curriculum, inside the jitted update.
 
+Memory: a recurrent policy's memory rides in the runner (``EnvRunner.memory``, None for an MLP);
+the network zeroes it where an env's observation starts an episode (``episode_length == 0``),
+as PureJaxRL's ``ScannedRNN`` resets on done, so segments may cross episodes.
+
 Ends of episodes: ``done = terminated | truncated``, both cut the bootstrap (PureJaxRL's
 convention; the racing observation has no clock, so a time-limit value would be guessed).
 """
@@ -39,8 +43,17 @@ from worldagent.curricula import as_curriculum
 from worldagent.curricula.scores import positive_value_loss
 from worldagent.envs.core import step_autoreset
 
-# apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])
-ApplyFn = Callable[[Any, jax.Array], tuple[jax.Array, jax.Array]]
+# apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B]); with memory (runner.memory
+# set): apply_fn(net_params, obs[B, ...], memory, first bool[B]) -> (logits, value, memory)
+ApplyFn = Callable[..., tuple]
+
+
+def with_memory(apply_fn: ApplyFn, memory: Any) -> Callable:
+    """``apply_fn`` as ``(params, obs, memory, first) -> (logits, value, memory)``: a memoryless
+    one ignores ``first`` and hands ``memory`` (None) back, so ``collect`` has one code path."""
+    if memory is not None:
+        return apply_fn
+    return lambda params, obs, memory, first: (*apply_fn(params, obs), memory)
 
 
 @struct.dataclass
@@ -62,6 +75,9 @@ class EnvRunner:
         used: bool[B] the pending world was started since it was drawn (it needs a new one).
         replayed, pending_replayed: bool[B] the world in play / pending was drawn by replay
             from the buffer (robust PLR learns only there), not merely found in it later.
+        memory: a recurrent policy's memory of each env's episode (a pytree, leading axis B),
+            as of before ``obs``; None for memoryless policies. An env whose ``episode_length``
+            is 0 starts an episode at ``obs``, and the network forgets there.
     """
 
     obs: jax.Array
@@ -79,6 +95,7 @@ class EnvRunner:
     used: jax.Array
     replayed: jax.Array
     pending_replayed: jax.Array
+    memory: Any = None
 
 
 @struct.dataclass
@@ -186,7 +203,9 @@ def collect(
     Args:
         key: PRNG key.
         runner: the envs' carry (``init_runner``).
-        apply_fn: ``apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])``.
+        apply_fn: ``apply_fn(net_params, obs[B, ...]) -> (logits f32[B, A], value f32[B])``;
+            where ``runner.memory`` is set, ``apply_fn(net_params, obs, memory, first bool[B]) ->
+            (logits, value, memory)`` (a recurrent actor-critic; ``first``: obs starts an episode).
         net_params: the actor-critic's parameters.
         env, env_params: the environment and its params.
         distribution: a curriculum, or a world distribution with ``sample(key) -> world``.
@@ -202,10 +221,11 @@ def collect(
     draw = curriculum.sample(runner.curriculum, key_worlds, draws_per_segment(curriculum, num_envs, num_steps))
     runner = refill(runner, draw)
     step_env = jax.vmap(lambda k, s, a, w: step_autoreset(env, k, s, a, env_params, next_world=w, ended_metrics=True))
+    forward = with_memory(apply_fn, runner.memory)
 
     def one_step(runner: EnvRunner, step_key):
         key_act, key_env = jax.random.split(step_key)
-        logits, value = apply_fn(net_params, runner.obs)
+        logits, value, memory = forward(net_params, runner.obs, runner.memory, runner.episode_length == 0)
         action, log_prob = sample_action(key_act, logits)
         obs, state, reward, terminated, truncated, info, metrics = step_env(jax.random.split(key_env, num_envs), runner.state, action, runner.pending)
         done = jnp.logical_or(terminated, truncated)
@@ -216,12 +236,12 @@ def collect(
         record = Trajectory(runner.obs, action, log_prob, value, reward, done, terminated, episode, metrics)
         runner = runner.replace(
             obs=obs, state=state, episode_return=jnp.where(done, 0.0, episode_return), episode_length=jnp.where(done, 0, episode_length),
-            used=runner.used | done,
+            used=runner.used | done, memory=memory,
         )  # fmt: skip
         return runner, record
 
     runner, trajectory = jax.lax.scan(one_step, runner, jax.random.split(key_steps, num_steps))
-    _, last_value = apply_fn(net_params, runner.obs)
+    _, last_value, _ = forward(net_params, runner.obs, runner.memory, runner.episode_length == 0)
     return runner, trajectory, last_value
 
 

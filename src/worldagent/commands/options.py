@@ -48,7 +48,8 @@ def option_flag():
 
 SET_HELP = (
     "A training setting NAME=VALUE: any field of the algorithm's config (repeatable), e.g. --set learning_rate=1e-3 --set hidden=64,64; "
-    "applied over the algorithm's defaults and the environment's departures from them. The resolved config is recorded in the run directory."
+    "applied over the algorithm's defaults and the environment's departures from them. The resolved config is recorded in the run directory. "
+    "PPO with memory, for worlds seen in part: --set recurrent=lstm (or gru; --set memory_size=256)."
 )
 
 

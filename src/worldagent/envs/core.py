@@ -109,12 +109,31 @@ def check_actions(value: Any, num_actions: int, shape: tuple[int, ...] = ()) -> 
     return array
 
 
+def initial_memory(policy) -> Any:
+    """The memory an episode of ``policy`` starts with: its ``initial_memory``, None if memoryless."""
+    return getattr(policy, "initial_memory", None)
+
+
+def policy_step(policy, obs: Any, key: jax.Array, state: Any, memory: Any) -> tuple[Any, Any]:
+    """``(action, memory)``: one step of ``policy``, the one adapter every rollout loop acts through.
+
+    A policy with memory (``step`` set, e.g. a recurrent PPO agent) steps with it; a memoryless
+    one (``agents.policy.Policy`` of an MLP, ``registry.ScriptedPolicy``) acts with
+    ``act(params, obs, key, state)`` and hands ``memory`` (None) back unchanged, so its loops
+    compute exactly what they did before policies had memory.
+    """
+    step = getattr(policy, "step", None)
+    if step is None:
+        return policy.act(policy.params, obs, key, state), memory
+    return step(policy.params, obs, key, state, memory)
+
+
 def rollout(env: Environment, policy, key: jax.Array, world: Any, params: Any, num_steps: int):
     """One episode of at most ``num_steps`` steps as a ``lax.scan``; frozen once it ends.
 
     Args:
         policy: a policy value with ``params`` and ``act(params, obs, key, state) -> action``
-            (pure JAX): ``agents.policy.Policy`` or ``registry.ScriptedPolicy``.
+            (pure JAX): ``agents.policy.Policy`` (with memory or not) or ``registry.ScriptedPolicy``.
 
     Returns:
         (final_state, trajectory): ``trajectory`` holds per-step pytrees with a leading time axis
@@ -125,18 +144,20 @@ def rollout(env: Environment, policy, key: jax.Array, world: Any, params: Any, n
     obs, state = env.reset(key_reset, world, params)
 
     def one_step(carry, step_key):
-        obs, state, done = carry
+        obs, state, done, memory = carry
         key_act, key_env = jax.random.split(step_key)
-        action = policy.act(policy.params, obs, key_act, state)
+        action, next_memory = policy_step(policy, obs, key_act, state, memory)
         next_obs, next_state, reward, terminated, truncated, _ = env.step(key_env, state, action, params)
         keep = lambda new, old: jax.lax.select(done, old, new)  # noqa: E731
         next_obs = keep(next_obs, obs)
         next_state = jax.tree_util.tree_map(keep, next_state, state)
+        next_memory = jax.tree_util.tree_map(keep, next_memory, memory)
         reward = jnp.where(done, jnp.zeros_like(reward), reward)
         ended = jnp.logical_or(terminated, truncated)
         next_done = jnp.logical_or(done, ended.any() if ended.ndim else ended)
         record = {"state": next_state.replace(world=None), "action": action, "reward": reward, "alive": ~done}
-        return (next_obs, next_state, next_done), record
+        return (next_obs, next_state, next_done, next_memory), record
 
-    (_, final_state, _), trajectory = jax.lax.scan(one_step, (obs, state, jnp.bool_(False)), jax.random.split(key_steps, num_steps))
+    start = (obs, state, jnp.bool_(False), initial_memory(policy))
+    (_, final_state, _, _), trajectory = jax.lax.scan(one_step, start, jax.random.split(key_steps, num_steps))
     return final_state, trajectory

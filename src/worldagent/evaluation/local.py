@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from worldagent.envs.core import Environment
+from worldagent.envs.core import Environment, initial_memory, policy_step
 from worldagent.errors import WorldagentError
 
 # Episodes each compiled call plays per device. On 2 CPU cores 256 is as fast per episode as
@@ -42,24 +42,28 @@ ACCELERATOR_EPISODES_PER_CALL = 4096
 
 
 def run_episode(env: Environment, policy, key: jax.Array, world: Any, params: Any, num_steps: int) -> dict[str, jax.Array]:
-    """One episode of at most ``num_steps`` steps; returns ``env.metrics`` of its last state."""
+    """One episode of at most ``num_steps`` steps; returns ``env.metrics`` of its last state.
+
+    A policy with memory starts from its ``initial_memory`` and carries it step to step
+    (``envs.core.policy_step``); a memoryless policy's memory is None and costs nothing.
+    """
     key_reset, key_steps = jax.random.split(key)
     obs, state = env.reset(key_reset, world, params)
 
     def running(carry):
-        t, _, _, done, _ = carry
+        t, _, _, done, _, _ = carry
         return jnp.logical_and(t < num_steps, ~done)
 
     def one_step(carry):
-        t, obs, state, _, key = carry
+        t, obs, state, _, key, memory = carry
         key, key_act, key_env = jax.random.split(key, 3)
-        action = policy.act(policy.params, obs, key_act, state)
+        action, memory = policy_step(policy, obs, key_act, state, memory)
         obs, state, _, terminated, truncated, _ = env.step(key_env, state, action, params)
         done = jnp.any(jnp.logical_or(terminated, truncated))
-        return t + 1, obs, state, done, key
+        return t + 1, obs, state, done, key, memory
 
-    carry = (jnp.int32(0), obs, state, jnp.bool_(False), key_steps)
-    _, _, final, _, _ = jax.lax.while_loop(running, one_step, carry)
+    carry = (jnp.int32(0), obs, state, jnp.bool_(False), key_steps, initial_memory(policy))
+    _, _, final, _, _, _ = jax.lax.while_loop(running, one_step, carry)
     return env.metrics(final)
 
 
@@ -121,7 +125,8 @@ def evaluate(
 
     Args:
         env: the environment.
-        policy: a ``Policy`` (a pytree with ``act(params, obs, key, state)``), or an external
+        policy: a ``Policy`` (a pytree with ``act(params, obs, key, state)``, or with memory and
+            ``step``), or an external
             ``HostPolicy`` (stepped by the batched host evaluator).
         worlds: B worlds with a leading batch axis.
         repeats: episodes per world (the paper: 8).

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from worldagent.envs import registry
-from worldagent.envs.core import Environment
+from worldagent.envs.core import Environment, initial_memory, policy_step
 from worldagent.errors import WorldagentError
 
 
@@ -63,7 +63,8 @@ def scored_keys(seed: int, repeats: int) -> jax.Array:
 
 
 def replay_episode(env: Environment, trace, policy, key: jax.Array, world: Any, params: Any, num_steps: int):
-    """One episode as ``local.run_episode`` plays it, recording ``trace(state)`` (where the agents are).
+    """One episode as ``local.run_episode`` plays it (memory threaded the same way), recording
+    ``trace(state)`` (where the agents are).
 
     Returns:
         (positions [T+1, ...], present [T+1, ...], steps i32, metrics of the last state).
@@ -72,19 +73,20 @@ def replay_episode(env: Environment, trace, policy, key: jax.Array, world: Any, 
     obs, state = env.reset(key_reset, world, params)
 
     def one_step(carry, _):
-        obs, state, done, steps, key = carry
+        obs, state, done, steps, key, memory = carry
         next_key, key_act, key_env = jax.random.split(key, 3)  # the evaluator's split, step for step
-        action = policy.act(policy.params, obs, key_act, state)
+        action, next_memory = policy_step(policy, obs, key_act, state, memory)
         next_obs, next_state, _, terminated, truncated, _ = env.step(key_env, state, action, params)
         ended = jnp.any(jnp.logical_or(terminated, truncated))
         keep = lambda new, old: jax.lax.select(done, old, new)  # noqa: E731  frozen once ended
         obs = jax.tree_util.tree_map(keep, next_obs, obs)
         state = jax.tree_util.tree_map(keep, next_state, state)
-        carry = (obs, state, jnp.logical_or(done, ended), steps + (~done).astype(jnp.int32), keep(next_key, key))
+        memory = jax.tree_util.tree_map(keep, next_memory, memory)
+        carry = (obs, state, jnp.logical_or(done, ended), steps + (~done).astype(jnp.int32), keep(next_key, key), memory)
         return carry, trace(state)
 
-    carry = (obs, state, jnp.bool_(False), jnp.int32(0), key_steps)
-    (_, final, _, steps, _), (positions, present) = jax.lax.scan(one_step, carry, None, length=num_steps)
+    carry = (obs, state, jnp.bool_(False), jnp.int32(0), key_steps, initial_memory(policy))
+    (_, final, _, steps, _, _), (positions, present) = jax.lax.scan(one_step, carry, None, length=num_steps)
     start, start_present = trace(state)
     positions = jnp.concatenate([start[None], positions])
     present = jnp.concatenate([jnp.broadcast_to(start_present, present.shape[1:])[None], present])

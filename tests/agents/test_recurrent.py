@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from flax import struct
+from typer.testing import CliRunner
 
 from toy_env import registered
 from worldagent.agents import training
@@ -21,10 +22,12 @@ from worldagent.agents.policy import network_policy
 from worldagent.agents.ppo import PPOConfig, _sequence_forward, _sequences, make_train
 from worldagent.agents.rollouts import action_log_prob, collect, init_runner
 from worldagent.agents.saved import load_policy, save_policy
+from worldagent.cli import app
 from worldagent.envs.core import Environment, policy_step, rollout
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.local import evaluate
-from worldagent.evaluation.trajectories import replay, replay_episode
+from worldagent.evaluation.trajectories import replay_episode
+from worldagent.explore.episodes import replay_marked
 
 DELAY = 4  # steps per episode: the cue at the first, the answer at the last
 
@@ -219,27 +222,36 @@ def test_bad_recurrent_settings_are_refused_in_one_line():
     assert parse_settings(["recurrent=gru", "memory_size=32"], ["ppo"]) == {"ppo": {"recurrent": "gru", "memory_size": 32}}
 
 
+TINY = dict(num_envs=8, num_steps=32, num_minibatches=2, update_epochs=1, hidden=(16,), recurrent="gru", memory_size=16)
+
+
 @pytest.mark.slow
-def test_recurrent_ppo_through_the_host_driver(tmp_path):
-    """The toy gridworld: a killed recurrent run resumes identically, its saved agent replays as the
-    evaluator scores it (the explorer's path), and seeds vmapped together equal seeds alone."""
-    config = PPOConfig(total_episodes=32, num_envs=8, num_steps=32, num_minibatches=2, update_epochs=1, hidden=(16,), recurrent="gru", memory_size=16)
+def test_recurrent_ppo_through_the_cli_the_host_driver_and_the_explorer(tmp_path):
+    """The toy gridworld: ``train --set recurrent=gru`` saves an agent that loads and replays (the
+    explorer's path) as the evaluator scores it; a killed recurrent run resumes identically; seeds
+    vmapped together equal seeds alone."""
+    sets = [f"--set={name}={','.join(map(str, value)) if isinstance(value, tuple) else value}" for name, value in TINY.items()]
     with registered() as toy:
+        result = CliRunner().invoke(app, ["train", "toy", "--algo", "ppo", "--episodes", "32", *sets, "--out", str(tmp_path / "cli"), "--quiet"])
+        assert result.exit_code == 0, result.output
+        saved = load_policy(tmp_path / "cli" / "policy", env=toy)
+        assert (saved.module.recurrent, saved.module.memory_size, saved.training["recurrent"]) == ("gru", 16, "gru")
+        env, params = toy.make_env()
         pool = world_distribution(toy, "generator", size=8, seed=0)
+        world = jax.tree_util.tree_map(lambda x: x[:1], pool.worlds)
+        keys = jax.random.split(jax.random.key(2), (1, 4))
+        scored = evaluate(env, saved.policy, world, 4, jax.random.key(0), keys=keys)
+        played, _ = replay_marked(toy, env, saved.policy, jax.tree_util.tree_map(lambda x: x[0], world), keys[0], params)
+        for name in ("return", "steps"):
+            np.testing.assert_array_equal(played.metrics[name], scored[name][0])
+
+        config = PPOConfig(total_episodes=32, **TINY)
         whole = training.train(toy, "ppo", config, pool, tmp_path / "whole", progress=False, chunk_updates=2)
         training.train(toy, "ppo", config, pool, tmp_path / "killed", progress=False, chunk_updates=2, stop_after_chunks=1)
         resumed = training.train(toy, "ppo", config, pool, tmp_path / "killed", progress=False, chunk_updates=2)
         assert resumed.resumed_from_update == 2
         for x, y in zip(jax.tree_util.tree_leaves(whole.agent.params), jax.tree_util.tree_leaves(resumed.agent.params)):
             np.testing.assert_array_equal(x, y)
-        agent = load_policy(tmp_path / "whole" / "policy", env=toy).policy
-        env = toy.make_env()[0]
-        world = jax.tree_util.tree_map(lambda x: x[:1], pool.worlds)
-        keys = jax.random.split(jax.random.key(2), (1, 4))
-        scored = evaluate(env, agent, world, 4, jax.random.key(0), keys=keys)
-        played = replay(toy, env, agent, jax.tree_util.tree_map(lambda x: x[0], world), keys[0])
-        for name in ("return", "steps"):
-            np.testing.assert_array_equal(played.metrics[name], scored[name][0])
         together = train_many(toy, "ppo", config, [ManyRun(tmp_path / f"many{s}", seed=s, distribution=pool) for s in (0, 1)], progress=False)
         for x, y in zip(jax.tree_util.tree_leaves(whole.agent.params), jax.tree_util.tree_leaves(together[0].agent.params)):
             np.testing.assert_allclose(x, y, atol=1e-4)

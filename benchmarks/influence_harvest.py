@@ -31,6 +31,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from influence_pooled import pooled_influenced_vs_default  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
 from train_harvest import evaluate  # noqa: E402
 from worldagent import experiments  # noqa: E402
@@ -180,6 +181,7 @@ def main(argv=None) -> dict:
         "per_seed": result["per_seed"],
         "summary": result["summary"],
         "intervals": comparison(result["summary"]),
+        "pooled_influenced_vs_default": pooled_influenced_vs_default(influence_dir),  # paired by world, pooled over seeds
         "paper": {"conflict": {"default": 0.51, "influenced": 0.05}, "equality": {"default": 0.33, "influenced": 0.78}},
         "selected_structure": selected_structure(influence_dir),  # against generator_quality's G(z) means
         "who_collects_what": who_collects_what(influence_dir, setup, args.diagnostic_worlds),

@@ -72,6 +72,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from curriculum import link_default_agents  # noqa: E402
 from influence_harvest import comparison  # noqa: E402
+from influence_pooled import pooled_influenced_vs_default  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
 from racing_regime import OPTIONS, REPEATS, episode_summary, in_window, regimes  # noqa: E402
 from worldagent import experiments  # noqa: E402
@@ -286,6 +287,7 @@ def heldout_evaluation(influence_dir: Path, setup, result: dict, selection_text:
         "per_seed": per_seed,
         "summary": summary,
         "intervals": comparison(summary),
+        "pooled_influenced_vs_default": pooled_influenced_vs_default(influence_dir),  # paired by world, pooled over seeds
         "without_failed_training": {"seeds": clean, "summary": summary_trained, "intervals": comparison(summary_trained)},
     }
 
@@ -470,6 +472,7 @@ def main(argv=None) -> dict:
         "per_seed": {**result["per_seed"], "steps_per_lap": speed},
         "summary": summary,
         "intervals": comparison(summary),
+        "pooled_influenced_vs_default": pooled_influenced_vs_default(influence_dir),  # paired by world, pooled over seeds
         "without_failed_training": {"summary": summary_trained, "intervals": comparison(summary_trained)},
         "reward_change_pct": round(100 * (reward["influenced"]["mean"] / reward["default"]["mean"] - 1), 2),
         "heldout": held,

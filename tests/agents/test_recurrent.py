@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from toy_env import registered
 from worldagent.agents import training
 from worldagent.agents.algorithms import parse_settings
-from worldagent.agents.distributions import WorldPool, world_distribution
+from worldagent.agents.distributions import LatentWorlds, WorldPool, world_distribution
 from worldagent.agents.many import ManyRun, train_many
 from worldagent.agents.networks import ActorCritic, initial_memory
 from worldagent.agents.policy import network_policy
@@ -23,6 +23,7 @@ from worldagent.agents.ppo import PPOConfig, _sequence_forward, _sequences, make
 from worldagent.agents.rollouts import action_log_prob, collect, init_runner
 from worldagent.agents.saved import load_policy, save_policy
 from worldagent.cli import app
+from worldagent.curricula import make_curriculum
 from worldagent.envs.core import Environment, policy_step, rollout
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.local import evaluate
@@ -220,6 +221,25 @@ def test_bad_recurrent_settings_are_refused_in_one_line():
     with pytest.raises(WorldagentError, match="a setting of ppo; train with --algo ppo"):
         parse_settings(["recurrent=lstm"], ["acktr"])
     assert parse_settings(["recurrent=gru", "memory_size=32"], ["ppo"]) == {"ppo": {"recurrent": "gru", "memory_size": 32}}
+
+
+class CueGenerator(struct.PyTreeNode):
+    """Latents to cue worlds (the sign of the first coordinate): enough of a G(z) for a curriculum."""
+
+    latent_dim: int = struct.field(pytree_node=False, default=2)
+
+    def __call__(self, z):
+        return Cue((z[:, 0] > 0).astype(jnp.int32))
+
+
+@pytest.mark.parametrize("name, settings", [("plr", {"robust": True}), pytest.param("accel", {}, marks=pytest.mark.slow)])
+def test_curricula_score_the_episodes_of_a_recurrent_student(name, settings):
+    curriculum = make_curriculum(name, LatentWorlds(CueGenerator()), {"buffer_size": 16, "replay_prob": 0.5, "min_fill": 0.25, **settings})
+    config = PPOConfig(**{**LEARN, "total_episodes": 128}, recurrent="lstm", memory_size=8)
+    state, curve = make_train(config, ENV, ENV.default_params, curriculum).train(jax.random.key(0))
+    buffer = state.runner.curriculum.buffer
+    assert (np.asarray(buffer.count) > 0).sum() >= 8 and np.isfinite(np.asarray(buffer.score)[np.asarray(buffer.count) > 0]).all()
+    assert np.isfinite(np.asarray(curve["policy_loss"])[np.asarray(curve["active"]) > 0]).all()
 
 
 TINY = dict(num_envs=8, num_steps=32, num_minibatches=2, update_epochs=1, hidden=(16,), recurrent="gru", memory_size=16)

@@ -1,0 +1,53 @@
+"""Training speed of PPO's memoryless MLP against its recurrent students (issue 42), same env, same config.
+
+    python benchmarks/recurrent_ppo_speed.py --env racing --updates 8
+
+Each arm compiles once (``train_chunk`` of ``--updates`` updates, timed after a warm-up chunk) and
+reports env steps per second of training (rollout + learning); arms alternate, best of ``--repeats``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import jax
+
+from worldagent.agents.algorithms import training_config
+from worldagent.agents.distributions import world_distribution
+from worldagent.agents.ppo import make_train
+from worldagent.envs import registry
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="racing")
+    parser.add_argument("--updates", type=int, default=8, help="updates per timed chunk")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--memory-size", type=int, default=256)
+    args = parser.parse_args()
+    spec = registry.get(args.env)
+    env, params = spec.make_env()
+    pool = world_distribution(spec, "generator", size=64, seed=0)
+    arms = {"mlp": None, "lstm": "lstm", "gru": "gru"}
+    trainers, states, best = {}, {}, {}
+    for name, cell in arms.items():
+        config = training_config(spec, "ppo", episodes=10**6, recurrent=cell, memory_size=args.memory_size)
+        trainers[name] = make_train(config, env, params, pool)
+        states[name], _ = trainers[name].train_chunk(trainers[name].init(jax.random.key(0)), args.updates)  # compile, warm up
+        jax.block_until_ready(states[name])
+        steps_per_update = config.num_envs * config.num_steps
+    for _ in range(args.repeats):
+        for name in arms:
+            start = time.perf_counter()
+            states[name], _ = trainers[name].train_chunk(states[name], args.updates)
+            jax.block_until_ready(states[name])
+            rate = args.updates * steps_per_update / (time.perf_counter() - start)
+            best[name] = max(best.get(name, 0.0), rate)
+    print(f"{args.env} PPO ({steps_per_update} steps per update, {jax.default_backend()}, memory {args.memory_size}):")
+    for name, rate in best.items():
+        print(f"  {name:5s} {rate:10,.0f} env steps/s  ({rate / best['mlp']:.2f} x MLP)")
+
+
+if __name__ == "__main__":
+    main()

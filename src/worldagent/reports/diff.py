@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from worldagent.analysis.diff import tail_warning
+
 
 def number(value, digits: int = 4) -> str:
     """A number for a table: 4 significant digits, "n/a" for None or NaN."""
@@ -37,17 +39,12 @@ def failure_lines(worlds: dict) -> list[str]:
     ]
 
 
-FEW_TAIL_WORLDS = (
-    100  # fewer, and a rare catastrophe may be absent from the tail (benchmarks/diff_coverage.py, racing: 57% at 10, 92% at 40, 96% at 100)
-)
-
-
 def cvar_line(worlds: dict) -> str:
     risk = worlds["cvar"]
-    few = f"; only {risk['tail']} tail worlds: a rare failure may be missing from them, so read it loosely" if risk["tail"] < FEW_TAIL_WORLDS else ""
+    warning = risk.get("warning", tail_warning(risk["tail"], risk["alpha"]))  # a diff.json written before the warning was kept
     return (
         f"α-CVaR ({risk['alpha']:.0%} worst worlds, {risk['tail']} of them) of {risk['metric']}: A {number(risk['a'])}, B {number(risk['b'])}; "
-        f"B − A {number(risk['difference'])} {interval(risk)} (bootstrap over worlds{few})."
+        f"B − A {number(risk['difference'])} {interval(risk)} (BCa bootstrap over worlds)." + (f" Warning: {warning}" if warning else "")
     )
 
 

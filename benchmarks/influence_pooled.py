@@ -1,6 +1,6 @@
 """Influenced against default agents, pooled over seeds and paired by world (issue 40).
 
-    python benchmarks/influence_pooled.py RUN/racing/influence [--json OUT.json]
+    python benchmarks/influence_pooled.py RUN/racing/influence [--record NAME]
 
 ``worldagent influence`` (and the influence benchmarks built on it) evaluates every trained agent on
 the same random worlds G(z) with the same episode keys (campaigns ``influence-eval-LABEL-sSEED-wW-rR``
@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import record  # noqa: E402
 from worldagent.analysis.diff import CVAR_ALPHA, cvar, pooled_difference  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.errors import WorldagentError  # noqa: E402
@@ -89,17 +90,17 @@ def pooled_influenced_vs_default(influence_dir: str | Path, prefix: str = "", re
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("influence_dir", type=Path, help="an influence directory (RUN/ENV/influence, or a benchmark's --work one)")
-    parser.add_argument("--json", type=Path, default=None, help="also write the result here")
+    parser.add_argument("--record", default=None, help="also write benchmarks/results/NAME-<backend>.json (with the machine)")
     args = parser.parse_args()
     result = {"influence_dir": str(args.influence_dir), **pooled_influenced_vs_default(args.influence_dir)}
+    result["command"] = "python benchmarks/influence_pooled.py " + " ".join(sys.argv[1:])
     for stat, row in result.items():
         if isinstance(row, dict):
             print(
                 f"{stat:>24}: default {row['base']:.4g}, influenced {row['arm']:.4g}, difference {row['difference']:+.4g} [{row['low']:+.4g}, {row['high']:+.4g}]"
             )
-    if args.json:
-        args.json.write_text(json.dumps(result, indent=1))
-        print(f"-> {args.json}")
+    if args.record:
+        print(f"-> {record(args.record, result)}")
 
 
 if __name__ == "__main__":

@@ -216,7 +216,7 @@ def tail_warning(tail: int, alpha: float) -> str | None:
     if tail >= MIN_TAIL_WORLDS:
         return None
     return (
-        f"the α-CVaR interval rests on {tail} tail worlds (< {MIN_TAIL_WORLDS}): a failure rarer than the tail shows is missing from it "
+        f"the α-CVaR interval rests on {tail} tail worlds (< {MIN_TAIL_WORLDS}): a failure too rare to reach the tail may be missing from it "
         f"(racing: 58% coverage at 10, 92% at 40); read it loosely, or pass --worlds {math.ceil(MIN_TAIL_WORLDS / alpha)} or more."
     )
 

@@ -6,3 +6,6 @@ jax 0.10 live in ``ued_maze.shims``, imported here first so every module of the 
 """
 
 from . import shims  # noqa: F401  (first: jaxued must not be imported before its jax 0.10 patches)
+from .world import PREFAB_NAMES  # noqa: E402  (the names of the ``prefabs`` world set, in its order)
+
+__all__ = ["PREFAB_NAMES"]

@@ -6,7 +6,7 @@ missing, so on an older jax (or a fixed jaxued) this module changes nothing.
 
 Found by importing and running what this package calls (the env's ``reset_env_to_level`` and
 ``step_env``, ``make_level_generator``, ``Level.from_str`` / ``pad_to_shape`` / ``load_prefabs``)
-on jax 0.10.2, gymnax 1.0.1, chex 0.1.92:
+on jax 0.10.2 with gymnax 0.0.9 (and 1.0.1) and chex 0.1.92:
 
 1. ``jax.tree_map``: jax 0.6 removed this alias of ``jax.tree_util.tree_map`` (its module
    ``__getattr__`` now raises ``AttributeError``). jaxued 0.0.1 still calls it in ``Level.stack``,
@@ -14,9 +14,9 @@ on jax 0.10.2, gymnax 1.0.1, chex 0.1.92:
    wrappers and level sampler, which this package does not call). jaxued's GitHub head has moved
    to ``jax.tree_util.tree_map``, but the wheel on the package index predates that.
 
-Nothing else was needed: gymnax 1.0.1 and chex 0.1.92 import and run on jax 0.10.2 as they are
-(gymnax does import ``six`` without declaring it: that is a missing dependency, not a jax change,
-so ``pyproject.toml`` declares ``six`` instead of patching it here).
+Nothing else was needed: gymnax and chex import and run on jax 0.10.2 as they are (gymnax does
+import ``six`` without declaring it: a missing dependency, not a jax change, so ``pyproject.toml``
+declares ``six`` instead of patching it here; it also says why gymnax is held below 1.0).
 """
 
 from __future__ import annotations

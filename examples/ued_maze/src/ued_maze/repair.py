@@ -36,7 +36,7 @@ def positions(index: jax.Array) -> jax.Array:
 
 @struct.dataclass
 class MazeRepair:
-    """Decoded logits to valid mazes (the module docstring says how).
+    """New valid mazes: the decoded wall count's likeliest cells, then the goal and the start on the likeliest free cells.
 
     Attributes:
         walls: "count" (the decoded wall count's most probable cells) or "threshold" (cells with p > 1/2).

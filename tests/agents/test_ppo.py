@@ -46,6 +46,22 @@ def test_ppo_raises_return_on_fixed_tracks_for_two_seeds(racing_env, racing_pool
     assert np.all(np.asarray(curves["active"]) == 1)
 
 
+def test_an_env_step_budget_stops_training_at_exactly_its_updates_and_anneals_by_it(racing_env, racing_pool, tiny_ppo):
+    steps = 3 * tiny_ppo.num_envs * tiny_ppo.num_steps - 1  # spent during the 3rd update
+    config = dataclasses.replace(tiny_ppo, total_episodes=10**6, total_env_steps=steps)
+    trainer = make_train(config, racing_env, racing_env.default_params, racing_pool)
+    assert trainer.max_updates == 3
+    state, curve = trainer.train_chunk(trainer.init(jax.random.key(0)), 5)
+    assert int(state.update) == 3 and int(state.env_steps) == 3 * tiny_ppo.num_envs * tiny_ppo.num_steps and trainer.done(state)
+    np.testing.assert_array_equal(np.asarray(curve["active"]), [1, 1, 1, 0, 0])
+    rates = np.asarray(curve["learning_rate"])[:3]
+    assert rates[0] > rates[1] > rates[2] and rates[2] < 0.5 * tiny_ppo.learning_rate  # annealed by steps, not by 10**6 episodes
+    by_episodes = make_train(dataclasses.replace(tiny_ppo, total_episodes=10**6), racing_env, racing_env.default_params, racing_pool)
+    assert not by_episodes.done(state)  # without the step budget the same state trains on
+    with pytest.raises(WorldagentError, match="total_env_steps=-1"):
+        dataclasses.replace(tiny_ppo, total_env_steps=-1)
+
+
 def test_train_is_vmappable_and_stops_at_the_budget(racing_env, racing_pool, tiny_ppo):
     trainer = make_train(tiny_ppo, racing_env, racing_env.default_params, racing_pool)
     states, curves = jax.vmap(trainer.train)(jax.random.split(jax.random.key(0), 2))

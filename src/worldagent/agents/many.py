@@ -104,14 +104,14 @@ def _is_pool(x) -> bool:
 
 
 def _program_args(runs: Sequence[OpenRun]) -> list[tuple]:
-    """Each run's ``(total_episodes, consts)``, its world pools padded to the largest pool of any run."""
+    """Each run's ``(budget, consts)``, its world pools padded to the largest pool of any run."""
     programs = [run.trainer.program for run in runs]
     if any(program is None for program in programs):
         raise WorldagentError("this algorithm's trainer has no trainer.Program; train its runs one by one with training.train.")
     pools = [x for p in programs for x in jax.tree_util.tree_leaves(p.consts, is_leaf=_is_pool) if _is_pool(x)]
     size = max((pool.size for pool in pools), default=0)
     pad = lambda consts: jax.tree_util.tree_map(lambda x: pad_pool(x, size) if _is_pool(x) else x, consts, is_leaf=_is_pool)  # noqa: E731
-    return [(p.total_episodes, pad(p.consts)) for p in programs]
+    return [(p.budget, pad(p.consts)) for p in programs]
 
 
 def _group_key(run: OpenRun, args: tuple) -> tuple:

@@ -52,12 +52,15 @@ class PPOConfig(JsonConfig):
 
     Attributes:
         total_episodes: training stops once this many episodes have ended (paper §5.3: 10,000).
+        total_env_steps: when > 0, training also stops once this many env steps are taken,
+            whichever budget is spent first (a step budget compares runs with other code bases,
+            e.g. jaxued's; 0: episodes only). Both count toward the learning-rate anneal.
         num_envs: B, envs stepped in parallel, each on its own world.
         num_steps: T, steps per env per update (an update learns from B·T steps).
         update_epochs: passes over each update's B·T steps.
         num_minibatches: minibatches per pass (each of B·T / num_minibatches steps).
         learning_rate: Adam step size at the start.
-        anneal_lr: decay the step size linearly to 0 with the fraction of episodes done.
+        anneal_lr: decay the step size linearly to 0 with the fraction of the budget spent.
         gamma: discount factor.
         gae_lambda: GAE's lambda.
         clip_eps: PPO's ratio clip (also clips the value update).
@@ -86,6 +89,7 @@ class PPOConfig(JsonConfig):
     """
 
     total_episodes: int = 10_000
+    total_env_steps: int = 0
     num_envs: int = 16
     num_steps: int = 128
     update_epochs: int = 4
@@ -113,6 +117,8 @@ class PPOConfig(JsonConfig):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise WorldagentError(f"PPOConfig.{name}={value!r}; it must be a positive integer.")
+        if isinstance(self.total_env_steps, bool) or not isinstance(self.total_env_steps, int) or self.total_env_steps < 0:
+            raise WorldagentError(f"PPOConfig.total_env_steps={self.total_env_steps!r}; it must be a whole number of env steps (0: no step budget).")
         if (self.num_envs * self.num_steps) % self.num_minibatches:
             raise WorldagentError(
                 f"num_envs·num_steps = {self.num_envs * self.num_steps} does not split into {self.num_minibatches} minibatches; "
@@ -176,6 +182,15 @@ def unchanged_params(env_params, config, fraction):
     return env_params
 
 
+def budget_fraction(state, config) -> jax.Array:
+    """f32 in [0, 1]: the share of the run's budget spent (episodes, or env steps where that budget is set and further along)."""
+    fraction = state.episodes / config.total_episodes
+    steps = getattr(config, "total_env_steps", 0)
+    if steps:
+        fraction = jnp.maximum(fraction, state.env_steps / steps)
+    return jnp.clip(fraction, 0.0, 1.0)
+
+
 def max_updates(total_episodes: int, num_envs: int, num_steps: int, max_episode_steps: int) -> int:
     """Updates after which ``total_episodes`` have surely ended (each env ends one every ``max_episode_steps``)."""
     return math.ceil(math.ceil(total_episodes / num_envs) * max_episode_steps / num_steps) + 1
@@ -214,8 +229,11 @@ def single_agent_trainer(name: str, config_type: type, core, config, env, env_pa
     if getattr(env, "num_agents", 1) != 1:
         raise WorldagentError(f"{name} trains single-agent envs; this env has {env.num_agents} agents: use an algorithm for several (dqn).")
     budget = max_updates(config.total_episodes, config.num_envs, config.num_steps, int(env_params.max_steps))
+    steps = getattr(config, "total_env_steps", 0)
+    if steps:
+        budget = min(budget, math.ceil(steps / (config.num_envs * config.num_steps)))
     init, update, network = core(config, env, training_params or unchanged_params)
-    return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution))
+    return budgeted_trainer(init, update, config.total_episodes, budget, network, (env_params, distribution), total_env_steps=steps)
 
 
 @functools.lru_cache(maxsize=16)
@@ -278,7 +296,7 @@ def _core(config: PPOConfig, env, training_params):
     def update(state: TrainState, consts) -> tuple[TrainState, dict]:
         params_env, distribution = consts
         key, key_roll, key_perm = jax.random.split(jax.random.wrap_key_data(state.key), 3)
-        fraction = jnp.clip(state.episodes / config.total_episodes, 0.0, 1.0)
+        fraction = budget_fraction(state, config)
         params_env = training_params(params_env, config, fraction)
         runner, traj, last_value = collect(key_roll, state.runner, network.apply, state.params, env, params_env, distribution, config.num_steps)
         advantages, targets = gae(traj.reward * config.reward_scale, traj.value, traj.done, last_value, config.gamma, config.gae_lambda)

@@ -24,6 +24,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 class Program(NamedTuple):
@@ -31,15 +32,15 @@ class Program(NamedTuple):
 
     Attributes:
         init: ``init(key, consts) -> state``.
-        chunk: ``chunk(state, n, total_episodes, consts) -> (state, curve)``, ``n`` static.
+        chunk: ``chunk(state, n, budget, consts) -> (state, curve)``, ``n`` static.
         consts: what this trainer passes as ``consts`` (env params, world distribution, ...).
-        total_episodes: i32, the episode budget.
+        budget: i32[2], the episode budget and the env-step budget (``budget_spent``).
     """
 
     init: Callable
     chunk: Callable
     consts: Any
-    total_episodes: jax.Array
+    budget: jax.Array
 
 
 class Trainer(NamedTuple):
@@ -52,7 +53,7 @@ class Trainer(NamedTuple):
         train: ``train(key) -> (state, curve)``, the whole budget (``max_updates`` rows).
         network: the Flax module the policy acts with.
         max_updates: updates that surely spend the budget.
-        done: ``done(state) -> bool``, the episode budget is spent.
+        done: ``done(state) -> bool``, the budget is spent.
         program: the same functions with their ``consts`` as arguments (``Program``).
     """
 
@@ -75,25 +76,38 @@ def curve_row(values: dict) -> dict:
     return {name: jnp.asarray(value, jnp.float32) for name, value in values.items()}
 
 
+NO_STEP_BUDGET = np.iinfo(np.int32).max  # env steps of a run budgeted by episodes alone
+
+
+def budget_spent(state, budget) -> jax.Array:
+    """bool: the run has ended ``budget[0]`` episodes or taken ``budget[1]`` env steps."""
+    return jnp.logical_or(state.episodes >= budget[0], state.env_steps >= budget[1])
+
+
 @functools.lru_cache(maxsize=32)
 def _jitted(init: Callable, update: Callable) -> tuple[Callable, Callable]:
     """Jitted ``init`` and chunk of ``init``/``update`` (cached: trainers built from the same functions compile once)."""
 
-    def chunk(state, n: int, total_episodes, consts):
+    def chunk(state, n: int, budget, consts):
         def skip(state):
             shapes = jax.eval_shape(update, state, consts)[1]
             return state, {k: jnp.float32(0.0) if k == "active" else jnp.full(s.shape, jnp.nan, s.dtype) for k, s in shapes.items()}
 
         def guarded(state, _):
-            return jax.lax.cond(state.episodes >= total_episodes, skip, lambda s: update(s, consts), state)
+            return jax.lax.cond(budget_spent(state, budget), skip, lambda s: update(s, consts), state)
 
         return jax.lax.scan(guarded, state, None, length=n)
 
     return jax.jit(init), jax.jit(chunk, static_argnums=1)
 
 
-def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budget: int, network: Any, consts: Any = None) -> Trainer:
+def budgeted_trainer(
+    init: Callable, update: Callable, total_episodes: int, budget: int, network: Any, consts: Any = None, total_env_steps: int = 0
+) -> Trainer:
     """A ``Trainer`` from ``init(key, consts) -> state`` and ``update(state, consts) -> (state, curve row)``.
+
+    Training stops once ``total_episodes`` episodes have ended or, when ``total_env_steps`` > 0,
+    that many env steps are taken, whichever comes first (``budget`` updates surely spend it).
 
     ``consts`` (env params, the world distribution) are passed into the jitted functions as
     arguments, not baked into the compiled program. ``train(key)`` is the jitted ``init``
@@ -103,13 +117,13 @@ def budgeted_trainer(init: Callable, update: Callable, total_episodes: int, budg
     ``jax.jit`` of it work as of any pure function.
     """
     init_jit, chunk = _jitted(init, update)
-    total = jnp.int32(total_episodes)
+    total = jnp.array([total_episodes, total_env_steps or NO_STEP_BUDGET], jnp.int32)
     return Trainer(
         init=lambda key: init_jit(key, consts),
         train_chunk=lambda state, n: chunk(state, n, total, consts),
         train=lambda key: chunk(init_jit(key, consts), budget, total, consts),
         network=network,
         max_updates=budget,
-        done=lambda state: state.episodes >= total_episodes,
+        done=lambda state: bool(budget_spent(state, total)),
         program=Program(init_jit, chunk, consts, total),
     )

@@ -98,10 +98,11 @@ def test_dataset_and_generator_commands_end_to_end(tmp_path):
     assert quality["warnings"] and all(f"warning: {line}" in report.output for line in quality["warnings"])
     assert {"latent", "sensitivity", "distinct_share"} <= set(quality["harvest"])
     assert "reused the VAE" not in result.output
-    again = runner.invoke(app, args + ["--repair", "open"])  # finished run: trains nothing more, rebuilds the repair
+    quality_history = json.loads((gen / "vae.json").read_text())["history"]
+    again = runner.invoke(app, args + ["--repair", "apples=30"])  # finished run: trains nothing more, rebuilds the repair
     assert again.exit_code == 0, again.output
     assert f"reused the VAE already trained in {gen} (2 epochs); only the repair was rebuilt" in again.output.replace("\n", "")
-    assert json.loads((gen / "generator.json").read_text())["repair_name"] == "open"
+    assert "apples=30" in again.output and json.loads((gen / "vae.json").read_text())["history"] == quality_history
 
 
 def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):

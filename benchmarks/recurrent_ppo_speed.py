@@ -4,12 +4,16 @@
 
 Each arm compiles once (``train_chunk`` of ``--updates`` updates, timed after a warm-up chunk) and
 reports env steps per second of training (rollout + learning); arms alternate, best of ``--repeats``.
+Writes ``benchmarks/results/recurrent-ppo-speed-<env>-m<memory>-<backend>.json`` with the machine.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import time
+from pathlib import Path
 
 import jax
 
@@ -17,6 +21,9 @@ from worldagent.agents.algorithms import training_config
 from worldagent.agents.distributions import world_distribution
 from worldagent.agents.ppo import make_train
 from worldagent.envs import registry
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import RESULTS, describe_machine  # noqa: E402
 
 
 def main() -> None:
@@ -47,6 +54,21 @@ def main() -> None:
     print(f"{args.env} PPO ({steps_per_update} steps per update, {jax.default_backend()}, memory {args.memory_size}):")
     for name, rate in best.items():
         print(f"  {name:5s} {rate:10,.0f} env steps/s  ({rate / best['mlp']:.2f} x MLP)")
+    record = {
+        "benchmark": "recurrent-ppo-speed",
+        "env": args.env,
+        "memory_size": args.memory_size,
+        "steps_per_update": steps_per_update,
+        "updates_per_chunk": args.updates,
+        "repeats": args.repeats,
+        "env_steps_per_s": {name: round(rate, 1) for name, rate in best.items()},
+        "relative_to_mlp": {name: round(rate / best["mlp"], 3) for name, rate in best.items()},
+        "machine": describe_machine(),
+        "command": "python benchmarks/recurrent_ppo_speed.py " + " ".join(sys.argv[1:]),
+    }
+    out = RESULTS / f"recurrent-ppo-speed-{args.env}-m{args.memory_size}-{jax.default_backend()}.json"
+    out.write_text(json.dumps(record, indent=1))
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

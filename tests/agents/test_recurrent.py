@@ -138,13 +138,14 @@ def test_the_learner_replays_segments_as_the_rollout_played_them():
     from the memory it began with; without the resets it would not."""
     network = ActorCritic(2, (8,), recurrent="lstm", memory_size=8)
     params = network.init(jax.random.key(0), jnp.zeros(3))
-    runner = init_runner(jax.random.key(1), ENV, ENV.default_params, POOL, 4).replace(memory=initial_memory("lstm", 8, (4,)))
+    runner = jax.jit(lambda key: init_runner(key, ENV, ENV.default_params, POOL, 4))(jax.random.key(1))  # one compile, not op by op
+    runner = runner.replace(memory=initial_memory("lstm", 8, (4,)))
     play = jax.jit(lambda key, runner, steps: collect(key, runner, network.apply, params, ENV, ENV.default_params, POOL, steps), static_argnums=2)
-    first_runner, _, _ = play(jax.random.key(2), runner, 3)
+    first_runner, _, _ = play(jax.random.key(2), runner, 10)  # the same compile as the segment: 10 steps end mid-episode too
     _, traj, _ = play(jax.random.key(3), first_runner, 10)
     assert traj.done.any() and (first_runner.episode_length > 0).all()  # mid-episode start, ends inside
     (obs, first, memory), action, *_ = _sequences(first_runner, traj, (traj.action,))
-    forward = _sequence_forward(network)
+    forward = jax.jit(_sequence_forward(network))  # one compile for both replays
     logits, value = forward(params, (obs, first, memory))
     np.testing.assert_allclose(action_log_prob(logits, action), traj.log_prob.T, atol=1e-5)
     np.testing.assert_allclose(value, traj.value.T, atol=1e-5)

@@ -17,11 +17,13 @@ from worldagent.errors import WorldagentError
 from worldagent.worlds.generator import build_generator, load_generator, save_generator
 from worldagent.worlds.quality import figures
 
+BATCH = 32  # every eager harvest decode here: one shape, so JAX compiles each eager op once for the file
+
 
 @pytest.mark.parametrize("which", ["racing", "harvest"])
 def test_generator_runs_under_jit_and_vmap(which, request):
     generator = request.getfixturevalue(f"{which}_generator")
-    z = jax.random.normal(jax.random.key(0), (6, generator.latent_dim))
+    z = jax.random.normal(jax.random.key(0), (BATCH, generator.latent_dim))
     eager = generator(z)
     jitted = jax.jit(lambda g, z: g(z))(generator, z)
     mapped = jax.jit(jax.vmap(lambda g, z: g(z[None]), in_axes=(None, 0)))(generator, z)
@@ -31,7 +33,7 @@ def test_generator_runs_under_jit_and_vmap(which, request):
 
 
 def test_generator_is_repair_of_the_decoded_logits(harvest_generator):
-    z = jax.random.normal(jax.random.key(2), (5, harvest_generator.latent_dim))
+    z = jax.random.normal(jax.random.key(2), (BATCH, harvest_generator.latent_dim))
     direct = harvest_generator.repair(harvest_generator.logits(z))
     for name in vars(direct):
         np.testing.assert_array_equal(getattr(harvest_generator(z), name), getattr(direct, name))
@@ -50,19 +52,19 @@ def test_racing_generator_returns_dataset_tracks(racing_generator, racing_data):
 
 def test_harvest_generator_maps_are_valid_with_the_median_apple_count(harvest_generator, harvest_data):
     assert isinstance(harvest_generator.repair, HarvestRepair)
-    maps = harvest_generator(jax.random.normal(jax.random.key(4), (32, harvest_generator.latent_dim)))
-    counts = np.asarray(maps.apples).reshape(32, -1).sum(1)
+    maps = harvest_generator(jax.random.normal(jax.random.key(4), (BATCH, harvest_generator.latent_dim)))
+    counts = np.asarray(maps.apples).reshape(BATCH, -1).sum(1)
     median = int(np.median(harvest_data.worlds.apples.reshape(len(harvest_data), -1).sum(1)))
     assert (counts == median).all() and harvest_generator.repair.config == {"apples": median, "walls": "nearest"}
     maps.validate()
     layouts = {row.tobytes() for row in harvest_data.worlds.walls.reshape(len(harvest_data), -1)}
-    assert all(row.tobytes() in layouts for row in np.asarray(maps.walls).reshape(32, -1))  # walls snap to the dataset's rooms
+    assert all(row.tobytes() in layouts for row in np.asarray(maps.walls).reshape(BATCH, -1))  # walls snap to the dataset's rooms
 
 
 def test_repair_config_sets_the_apple_count_and_is_checked(harvest_vae, harvest_data):
     generator = build_generator(harvest_vae, harvest_data, repair_config={"apples": 7})
-    maps = generator(jnp.zeros((3, generator.latent_dim)))
-    assert (np.asarray(maps.apples).reshape(3, -1).sum(1) == 7).all()
+    maps = generator(jnp.zeros((BATCH, generator.latent_dim)))
+    assert (np.asarray(maps.apples).reshape(BATCH, -1).sum(1) == 7).all()
     for bad in (-1, DEFAULT_SIZE * DEFAULT_SIZE):
         with pytest.raises(WorldagentError, match="apples="):
             build_generator(harvest_vae, harvest_data, repair_config={"apples": bad})

@@ -30,6 +30,16 @@ APPLES = 27
 FOUR_NEIGHBOURS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]])
 repair = jax.jit(OpenRooms(apples=APPLES, rounds=1, entrances="posterior", grid=(SIZE, SIZE)))
 choose = jax.jit(jax.vmap(choose_rooms))
+pair_scores_jit = jax.jit(pair_scores)
+layout_walls_jit = jax.jit(layout_walls, static_argnums=2)
+
+
+@jax.jit
+def generator_rooms(choice: jax.Array) -> tuple[jax.Array, ...]:
+    """The generator's rule for corner options ``choice`` int32[4], compiled once: (group_masks, closed walls, the
+    walls bordering the groups' union, entrance candidates)."""
+    group_masks, closed = region_walls(*rooms_of(choice, SIZE), SIZE)
+    return group_masks, closed, bordering_walls(group_masks.any(axis=0)), entrance_candidates(closed, group_masks)
 
 
 def confident(maps, scale: float = 8.0) -> jax.Array:
@@ -48,6 +58,13 @@ def check_valid(maps, apples: int = APPLES) -> None:
     for i in range(len(walls)):
         index_maps(maps, i).validate()
     np.testing.assert_array_equal(fruit.sum(axis=(1, 2)), apples)
+
+
+@pytest.fixture(scope="module")
+def random_repaired():
+    """64 noisy logits (key 0) and their open repair (the shared batch-64 compile)."""
+    logits = random_logits(jax.random.key(0), 64)
+    return logits, repair(logits)
 
 
 @pytest.fixture(scope="module")
@@ -75,9 +92,8 @@ def test_new_layouts_come_out_not_only_the_datasets(harvest_data):
     assert (np.asarray(repaired.walls) == fresh.walls).all(axis=(1, 2)).mean() >= 0.95
 
 
-def test_random_logits_give_valid_maps_with_rooms_closed_by_the_generators_rule():
-    logits = random_logits(jax.random.key(0), 64)
-    repaired = repair(logits)
+def test_random_logits_give_valid_maps_with_rooms_closed_by_the_generators_rule(random_repaired):
+    logits, repaired = random_repaired
     check_valid(repaired)
     wall_logits = logits.reshape(-1, 2, SIZE, SIZE)[:, 0]
     choices = np.asarray(choose(wall_logits))
@@ -85,11 +101,11 @@ def test_random_logits_give_valid_maps_with_rooms_closed_by_the_generators_rule(
     assert choices.min() >= 0 and choices.max() < len(heights)
     rooms = 0
     for walls, choice in zip(np.asarray(repaired.walls)[:24], choices[:24]):  # 64 decoded (the shared compile), 24 checked
-        group_masks, closed = (np.asarray(a) for a in region_walls(*rooms_of(jnp.asarray(choice), SIZE), SIZE))
-        np.testing.assert_array_equal(closed, np.asarray(bordering_walls(jnp.asarray(group_masks.any(axis=0)))))
+        group_masks, closed, bordering, candidates = (np.asarray(a) for a in generator_rooms(jnp.asarray(choice)))
+        np.testing.assert_array_equal(closed, bordering)
         entrances = closed & ~walls
         assert not (walls & ~closed).any()  # only the generator's walls, less its entrances
-        assert (entrances <= np.asarray(entrance_candidates(jnp.asarray(closed), jnp.asarray(group_masks))).any(axis=0)).all()
+        assert (entrances <= candidates.any(axis=0)).all()
         labels, _ = ndimage.label(~walls, FOUR_NEIGHBOURS)
         sealed, _ = ndimage.label(~closed, FOUR_NEIGHBOURS)
         outside = ~group_masks.any(axis=0)
@@ -113,41 +129,41 @@ def test_search_scores_match_the_generators_walls():
     tables = search_tables(SIZE)
     count = len(corner_options(SIZE)[0])
     for choice in rng.integers(0, count, size=(6, NUM_CORNERS)):
-        _, walls = region_walls(*rooms_of(jnp.asarray(choice), SIZE), SIZE)
+        _, walls, _, _ = generator_rooms(jnp.asarray(choice, jnp.int32))
         other = np.maximum(tables["top"][choice[1]], tables["bottom"][choice[3]])  # TR, BR
-        scores = pair_scores(wall_logit, jnp.asarray(other))
+        scores = pair_scores_jit(wall_logit, jnp.asarray(other))
         np.testing.assert_allclose(scores[choice[0] * count + choice[2]], jnp.where(walls, wall_logit, 0.0).sum(), rtol=1e-5, atol=1e-4)
 
 
 def test_entrances_follow_the_wall_logits():
     """A merged region gets the entrance its least confident wall cell offers, if the region's logits call for one."""
     choice = jnp.asarray([1 + 3 * 10 + 4, 0, 0, 0], jnp.int32)  # TL room, 8 high and 9 wide
-    group_masks, walls = region_walls(*rooms_of(choice, SIZE), SIZE)
-    candidates = np.asarray(entrance_candidates(walls, group_masks)).any(axis=0)
+    _, walls, _, candidates = generator_rooms(choice)
+    candidates = np.asarray(candidates).any(axis=0)
     count = int(candidates.sum())
     wall_logit = jnp.where(walls, 5.0, -5.0)
     for posterior in (True, False):
-        np.testing.assert_array_equal(layout_walls(wall_logit, choice, posterior), walls)
-        corner_cell = layout_walls(wall_logit.at[7, 8].set(-9.0), choice, posterior)  # no straight passage through a corner
+        np.testing.assert_array_equal(layout_walls_jit(wall_logit, choice, posterior), walls)
+        corner_cell = layout_walls_jit(wall_logit.at[7, 8].set(-9.0), choice, posterior)  # no straight passage through a corner
         np.testing.assert_array_equal(corner_cell, walls)
-        opened = layout_walls(wall_logit.at[7, 3].set(-np.log(count) - 0.1), choice, posterior)
+        opened = layout_walls_jit(wall_logit.at[7, 3].set(-np.log(count) - 0.1), choice, posterior)
         np.testing.assert_array_equal(opened, walls.at[7, 3].set(False))
     # One unsure cell: below 0 raises the likelihood, but an entrance (half the time, at one of
     # the candidates) is the more probable only below about -log(candidates).
     unsure = wall_logit.at[7, 3].set(-np.log(count) + 0.5)
-    np.testing.assert_array_equal(layout_walls(unsure, choice, posterior=False), walls.at[7, 3].set(False))
-    np.testing.assert_array_equal(layout_walls(unsure, choice, posterior=True), walls)
+    np.testing.assert_array_equal(layout_walls_jit(unsure, choice, posterior=False), walls.at[7, 3].set(False))
+    np.testing.assert_array_equal(layout_walls_jit(unsure, choice, posterior=True), walls)
     # Every candidate a little unsure: no one cell is far below 0, but together they say there is an entrance.
     doubtful = jnp.where(jnp.asarray(candidates), -0.2, wall_logit).at[7, 3].set(-0.3)
-    np.testing.assert_array_equal(layout_walls(doubtful, choice, posterior=True), walls.at[7, 3].set(False))
+    np.testing.assert_array_equal(layout_walls_jit(doubtful, choice, posterior=True), walls.at[7, 3].set(False))
     sure = jnp.where(jnp.asarray(candidates), 0.2, wall_logit)  # all above 0: never an entrance
-    np.testing.assert_array_equal(layout_walls(sure, choice, posterior=True), walls)
+    np.testing.assert_array_equal(layout_walls_jit(sure, choice, posterior=True), walls)
 
 
-def test_apples_are_the_k_most_likely_free_cells():
-    maps = generate_maps(seeds_from(7, 4))
+def test_apples_are_the_k_most_likely_free_cells(generated):
+    maps, _ = generated  # 64 maps: the shared batch-64 compile
     logits = confident(maps).reshape(-1, 2, SIZE * SIZE)
-    apple_logit = jax.random.normal(jax.random.key(3), (4, SIZE * SIZE)) + 20.0 * jnp.asarray(maps.walls.reshape(4, -1))
+    apple_logit = jax.random.normal(jax.random.key(3), (64, SIZE * SIZE)) + 20.0 * jnp.asarray(maps.walls.reshape(64, -1))
     repaired = repair(jnp.concatenate([logits[:, 0], apple_logit], axis=1))
     check_valid(repaired)
     corners = np.zeros((SIZE, SIZE), bool)
@@ -157,12 +173,11 @@ def test_apples_are_the_k_most_likely_free_cells():
         assert score[fruit.reshape(-1)].min() >= score[free & ~fruit.reshape(-1)].max()
 
 
-def test_jit_and_vmap_agree_with_one_call():
-    logits = random_logits(jax.random.key(5), 6)
-    once = repair(logits)
-    nested = jax.jit(jax.vmap(OpenRooms(apples=APPLES, rounds=1, entrances="posterior", grid=(SIZE, SIZE))))(logits.reshape(3, 2, -1))
-    np.testing.assert_array_equal(np.asarray(nested.walls).reshape(6, SIZE, SIZE), once.walls)
-    np.testing.assert_array_equal(np.asarray(nested.apples).reshape(6, SIZE, SIZE), once.apples)
+def test_jit_and_vmap_agree_with_one_call(random_repaired):
+    logits, once = random_repaired  # one call on 64 (the shared compile); its first 8 against 2 vmapped calls on 4 each
+    nested = jax.jit(jax.vmap(OpenRooms(apples=APPLES, rounds=1, entrances="posterior", grid=(SIZE, SIZE))))(logits[:8].reshape(2, 4, -1))
+    np.testing.assert_array_equal(np.asarray(nested.walls).reshape(8, SIZE, SIZE), once.walls[:8])
+    np.testing.assert_array_equal(np.asarray(nested.apples).reshape(8, SIZE, SIZE), once.apples[:8])
 
 
 def test_from_dataset_settings_and_config(harvest_data):

@@ -110,8 +110,9 @@ def jaxued_side(path: Path) -> dict:
 def train_arm(spec, config, curriculum, seeds, work: Path, progress: bool) -> list[str]:
     """The arm's agents (its seeds as one vmapped program; a finished one is read back, a killed one resumes)."""
     runs = [ManyRun(work / f"s{seed}", seed=seed, distribution=curriculum, distribution_spec=label(curriculum)) for seed in seeds]
-    if not all((run.out_dir / "policy" / "policy.json").is_file() for run in runs):
-        train_many(spec, "ppo", config, runs, progress=progress)
+    pending = [run for run in runs if not (run.out_dir / "policy" / "policy.json").is_file()]  # added seeds train alone
+    if pending:
+        train_many(spec, "ppo", config, pending, progress=progress)
     return [str(run.out_dir) for run in runs]
 
 

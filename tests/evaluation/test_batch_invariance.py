@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -18,19 +17,19 @@ from pathlib import Path
 import pytest
 
 from worldagent.worlds.dataset import make_dataset
-from worldagent.worlds.generator import build_generator
+from worldagent.worlds.generator import build_generator, save_generator
 from worldagent.worlds.vae import VAEConfig, train_vae
 
 SCRIPT = r"""
-import json, pickle, sys
+import json, sys
 import jax, jax.numpy as jnp, numpy as np
 
 out = {}
 if sys.argv[2] == "generator":  # a generator made in the test's process (its weights need no optimised compiler)
     from worldagent.search.objectives import generate
+    from worldagent.worlds.generator import load_generator
 
-    with open(sys.argv[3], "rb") as file:
-        generator = pickle.load(file)
+    generator = load_generator(sys.argv[3])[0]
     z = jax.random.normal(jax.random.key(1), (42, generator.latent_dim))
     for size in (42, 7, 1):
         parts = [np.asarray(generate(generator, z[s : s + size], logits=True)) for s in range(0, 42, size)]
@@ -100,13 +99,13 @@ def results(tmp_path_factory):
     try:
         data = make_dataset("harvest", 64, seed=0, progress=False)
         config = VAEConfig(encoder=(32,), decoder=(32,), epochs=1, batch_size=16)
-        pickled = tmp_path / "generator.pkl"
-        pickled.write_bytes(pickle.dumps(build_generator(train_vae(data, config, progress=False), data)))
+        vae = train_vae(data, config, progress=False)
+        saved = save_generator(tmp_path / "generator", vae, data.save(tmp_path / "harvest.npz"), build_generator(vae, data))
     except BaseException:
         for process, _ in episodes:  # not left running
             process.kill()
         raise
-    one_device = finish([*episodes[:1], start_script(tmp_path, 1, "generator", str(pickled))])
+    one_device = finish([*episodes[:1], start_script(tmp_path, 1, "generator", str(saved))])
     return one_device, finish(episodes[1:])
 
 

@@ -35,10 +35,10 @@ from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
 from worldagent.evaluation.local import evaluate
 from worldagent.progress import progress_bar
-from worldagent.search.campaign import CampaignSpec, Outcome, evaluation_seed, run_campaign
+from worldagent.search.campaign import CampaignSpec, Outcome, campaign_stream, run_campaign, stored_seed
 from worldagent.search.objectives import episode_records, generate
 from worldagent.search.optimisers import OptimiserConfig
-from worldagent.store import Evaluation, RunStore
+from worldagent.store import Evaluation, RunStore, agent_identity
 
 SET_BATCH = 64  # worlds of a world set evaluated (and committed) at a time
 SEARCHES = ("cmaes", "atlas")
@@ -253,14 +253,13 @@ def require_generator(setup: DiffSetup) -> None:
 
 
 def check_agents(store: RunStore, name: str, setup: DiffSetup) -> None:
-    """A paired campaign already in the store must have compared the same two agents (by kind and file
-    hash, or name); else one line, before anything runs."""
+    """A paired campaign already in the store must have compared the same two agents (``store.agent_identity``:
+    by content, a callable by its function too); else one line, before anything runs."""
     existing = store.campaign(name)
     if existing is None:
         return
-    same = lambda record: [record.get("kind"), record.get("sha256") or record.get("path")]  # noqa: E731
     recorded = existing.config.get("diff", {})
-    if [same(recorded.get(k, {})) for k in ("a", "b")] != [same(r) for r in setup.records().values()]:
+    if [agent_identity(recorded.get(k, {})) for k in ("a", "b")] != [agent_identity(r) for r in setup.records().values()]:
         raise WorldagentError(f"campaign {name!r} in {store.path} compared other agents; pass another --out (or --seed) for these two.")
 
 
@@ -296,18 +295,18 @@ def prior_set(store: RunStore, setup: DiffSetup, worlds: int, *, seed: int = 0, 
 
 def fixed_set(store: RunStore, setup: DiffSetup, world_set: WorldSet, *, seed: int = 0, progress: bool = True) -> list[Evaluation]:
     """Both agents on every world of ``world_set`` (world i as slot i of generation 0, its keys from
-    ``evaluation_seed(seed, 0, i)``): one paired campaign, committed batch by batch, resumed by a rerun."""
+    ``stored_seed(campaign, 0, i)``): one paired campaign, committed batch by batch, resumed by a rerun."""
     main, count = setup.spec.metrics.main, len(world_set)
     name = set_campaign_name(world_set.tag, seed)
     check_agents(store, name, setup)
     dim = 0 if world_set.latents is None else world_set.latents.shape[1]
-    config = {"dim": dim, "agent": agent_record(setup.b.policy), "diff": setup.records(), "worlds": world_set.source}
+    config = {"dim": dim, "agent": agent_record(setup.b.policy), "diff": setup.records(), "worlds": world_set.source, "stream": campaign_stream(name)}
     campaign = store.open_campaign(name, setup.spec.name, main, False, "fixed", count, seed, config, resume=True)
     done = {e.slot for e in store.evaluations(name)}
     missing = [i for i in range(count) if i not in done]
     backend = setup.backend or LocalBackend()
     evaluate_batch = FixedWorlds(PairedObjective(setup, main), world_set.worlds)
-    seeds = {s: evaluation_seed(seed, 0, s) for s in missing}
+    seeds = {s: stored_seed(campaign, 0, s) for s in missing}
     batches = [
         (slots, np.asarray(slots, np.float64)[:, None], np.array([seeds[s] for s in slots])) for slots in split(missing, backend.workers, SET_BATCH)
     ]

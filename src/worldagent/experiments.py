@@ -29,7 +29,7 @@ from worldagent.agents.policy import agent_record
 from worldagent.envs import registry
 from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
-from worldagent.search.campaign import CampaignSpec, best_evaluation, evaluation_seed, run_campaign
+from worldagent.search.campaign import CampaignSpec, best_evaluation, evaluation_seed, run_campaign, stored_seed
 from worldagent.search.objectives import LatentObjective, Objective
 from worldagent.search.optimisers import OPTIMISERS, OptimiserConfig
 from worldagent.store import Evaluation, RunStore
@@ -392,7 +392,7 @@ def scored_keys_of(store: RunStore, evaluation: Evaluation) -> Any:
     campaign = store.campaign(evaluation.campaign)
     if campaign is None:
         raise WorldagentError(f"campaign {evaluation.campaign!r} is not in {store.path}; pass the store it was run in.")
-    return scored_keys(evaluation_seed(campaign.seed, evaluation.generation, evaluation.slot), len(evaluation.episodes))
+    return scored_keys(stored_seed(campaign, evaluation.generation, evaluation.slot), len(evaluation.episodes))
 
 
 def with_world(store: RunStore, evaluation: Evaluation) -> Evaluation:
@@ -485,6 +485,7 @@ def atlas_summary(store: RunStore, grid: Any, describe: Any, campaigns: Sequence
             "coverage": archive.coverage(grid),
             "qd_score": archive.qd_score(offset, maximize),
             "qd_offset": offset,
+            "stream": int(store.campaign(name).config.get("stream", 0)) if store.campaign(name) else 0,
             "failing": int(len(failing)) if failure is not None else None,
             "distinct_failing": distinct_count([worlds[i] for i in failing if worlds[i] is not None]) if failure is not None else None,
             "grid": grid,
@@ -531,7 +532,7 @@ def explain_failures(setup: Setup, summary: dict, failure: Any, *, count: int = 
         worst = found[int(sub.best[pick])]
         # every point of the segment plays the episodes the failing world was scored with, so
         # the verdict changes only where the world does (not with the episodes' randomness)
-        episodes_seed = evaluation_seed(seed, worst.generation, worst.slot)
+        episodes_seed = evaluation_seed(seed, worst.generation, worst.slot, summary.get("stream", 0))
         fails = lambda z, s=episodes_seed: failure.mask(objective(z, np.full(len(z), s)))  # noqa: E731
         z_pass = passing[nearest(worst.latent, passing)]
         pairs.append({"boundary": boundary(fails, worst.latent, z_pass), "seed": episodes_seed, "cell_score": float(sub.scores[pick])})

@@ -11,6 +11,13 @@ Tables::
     meta(key, value)                       schema_version, created, worldagent version
     campaigns(id, name, env, objective, maximize, optimiser, budget, seed, config, created)
     evaluations(id, campaign_id, generation, slot, latent, world, score, episodes, started, finished)
+    confirmations(id, agent, env, world, seed, repeats, episodes, arrays, started, finished)
+    selections(id, name, world, campaign, generation, slot, metric, found, found_episodes, created)
+
+``confirmations`` hold each selected world replayed on fresh episodes (``analysis.confirm``), one row
+per (agent identity, env, world digest, confirmation seed, repeats); ``selections`` say which
+selection picked which world from which evaluation, with the figure it was picked on (provenance).
+Both are created on the first write, so stores from before them read as having none.
 
 ``latent`` is JSON (a list of floats), ``world`` the world's arrays as ``.npz`` bytes (no
 pickle), ``episodes`` JSON: a list, one dict of metrics per episode.
@@ -19,6 +26,7 @@ pickle), ``episodes`` JSON: a list, one dict of metrics per episode.
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import os
@@ -49,6 +57,17 @@ CREATE TABLE IF NOT EXISTS evaluations (
     generation INTEGER NOT NULL, slot INTEGER NOT NULL, latent TEXT NOT NULL, world BLOB,
     score REAL, episodes TEXT NOT NULL, started REAL NOT NULL, finished REAL NOT NULL,
     UNIQUE (campaign_id, generation, slot));
+"""
+
+_CONFIRMATION_SCHEMA = """
+CREATE TABLE IF NOT EXISTS confirmations (
+    id INTEGER PRIMARY KEY, agent TEXT NOT NULL, env TEXT NOT NULL, world TEXT NOT NULL, seed INTEGER NOT NULL,
+    repeats INTEGER NOT NULL, episodes TEXT NOT NULL, arrays BLOB, started REAL NOT NULL, finished REAL NOT NULL,
+    UNIQUE (agent, env, world, seed, repeats));
+CREATE TABLE IF NOT EXISTS selections (
+    id INTEGER PRIMARY KEY, name TEXT NOT NULL, world TEXT NOT NULL, campaign TEXT NOT NULL, generation INTEGER NOT NULL,
+    slot INTEGER NOT NULL, metric TEXT NOT NULL, found REAL, found_episodes INTEGER NOT NULL, created REAL NOT NULL,
+    UNIQUE (name, world));
 """
 
 
@@ -89,6 +108,45 @@ def encode_world(world: Any) -> bytes:
     return buffer.getvalue()
 
 
+def world_digest(arrays: dict[str, np.ndarray]) -> str:
+    """sha256 of a world's arrays (names, dtypes, shapes, bytes): what "the same world" means after repair
+    (DESIGN.md "Identity"); worlds that repair made identical share it."""
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}:{value.dtype.str}:{value.shape}".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
+@dataclass(frozen=True)
+class Confirmation:
+    """One world replayed on fresh episodes: ``episodes`` (one dict of metrics each) from ``repeats`` keys of ``seed``."""
+
+    agent: str
+    env: str
+    world: str
+    seed: int
+    repeats: int
+    episodes: list[dict]
+    arrays: dict[str, np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class Selected:
+    """Provenance: selection ``name`` picked world ``world`` from evaluation (campaign, generation, slot) on ``found``
+    (``metric`` averaged over ``found_episodes`` episodes)."""
+
+    name: str
+    world: str
+    campaign: str
+    generation: int
+    slot: int
+    metric: str
+    found: float
+    found_episodes: int
+
+
 def decode_world(blob: bytes) -> dict[str, np.ndarray]:
     """The arrays of a world stored with ``encode_world`` (no pickle)."""
     with np.load(io.BytesIO(blob), allow_pickle=False) as data:
@@ -109,13 +167,25 @@ def _use_wal(db: sqlite3.Connection, patience: float = 30.0) -> None:
             time.sleep(0.01)
 
 
+def agent_identity(record: dict) -> list:
+    """What makes two agent records (``agents.policy.agent_record``) the same agent (DESIGN.md "Identity"): the
+    kind and the hash of its files, not where they are now; a callable's function name beside its module's
+    hash (two functions of one module are two agents); agents without files by their name."""
+    kind, path, sha256 = record.get("kind"), record.get("path") or "", record.get("sha256")
+    if kind == "callable":
+        return [kind, path.partition(":")[2], sha256 or path]
+    return [kind, sha256 or path]
+
+
 def _resumable(have: dict, wanted: dict) -> tuple[dict, dict]:
-    """The parts of two campaign configs that must agree to resume: the agent by its kind and file
-    hash, not by where its files are now (agents without files by name); stores from before
-    agents were recorded, without it."""
+    """The parts of two campaign configs that must agree to resume: the agent by its identity
+    (``agents.policy.agent_identity``: content, not where its files are now); stores from before
+    agents (or episode streams) were recorded, without them."""
+    if "stream" not in have:  # stored before campaigns had their own episode streams: resumed on the old rule
+        wanted = {k: v for k, v in wanted.items() if k != "stream"}
     if "agent" not in have:
         return have, {k: v for k, v in wanted.items() if k != "agent"}
-    same = lambda agent: agent and [agent.get("kind"), agent.get("sha256") or agent.get("path")]  # noqa: E731
+    same = lambda agent: agent and agent_identity(agent)  # noqa: E731
     return {**have, "agent": same(have.get("agent"))}, {**wanted, "agent": same(wanted.get("agent"))}
 
 
@@ -331,6 +401,67 @@ class RunStore:
                 f"{self.path} holds no world for campaign {campaign!r} generation {generation} slot {slot}; pick a stored evaluation."
             )
         return decode_world(row[0])
+
+    # -- confirmations (analysis.confirm) --------------------------------------------------------
+
+    def _confirmation_tables(self) -> bool:
+        return {"confirmations", "selections"} <= self._tables()
+
+    def _ensure_confirmation_tables(self) -> None:
+        if not self._confirmation_tables():
+            with self.db:
+                for statement in filter(str.strip, _CONFIRMATION_SCHEMA.split(";")):
+                    self.db.execute(statement)
+
+    def add_confirmation(self, confirmation: Confirmation, started: float) -> None:
+        """Commit one world's confirmation (atomic); the same one committed twice is kept once."""
+        self._ensure_confirmation_tables()
+        c = confirmation
+        blob = None
+        if c.arrays is not None:
+            buffer = io.BytesIO()
+            np.savez_compressed(buffer, **{name: np.asarray(value) for name, value in c.arrays.items()})
+            blob = buffer.getvalue()
+        with self.db:
+            self.db.execute(
+                "INSERT OR IGNORE INTO confirmations (agent, env, world, seed, repeats, episodes, arrays, started, finished) VALUES (?,?,?,?,?,?,?,?,?)",
+                (c.agent, c.env, c.world, int(c.seed), int(c.repeats), json.dumps(c.episodes, default=_json_number), blob, started, time.time()),
+            )
+
+    def confirmations(self, agent: str | None = None, env: str | None = None, with_worlds: bool = False) -> list[Confirmation]:
+        """Stored confirmations (of one agent identity and env, or all), in the order they were made."""
+        if not self._confirmation_tables():
+            return []
+        where, args = [], []
+        for column, value in (("agent", agent), ("env", env)):
+            if value is not None:
+                where.append(f"{column}=?")
+                args.append(value)
+        query = f"SELECT agent, env, world, seed, repeats, episodes, {'arrays' if with_worlds else 'NULL'} FROM confirmations"
+        query += (" WHERE " + " AND ".join(where) if where else "") + " ORDER BY id"
+        return [
+            Confirmation(a, e, w, s, r, json.loads(episodes), decode_world(blob) if blob is not None else None)
+            for a, e, w, s, r, episodes, blob in self.db.execute(query, args)
+        ]
+
+    def add_selection(self, selected: Selected) -> None:
+        """Record that a selection picked a world (kept once per selection and world)."""
+        self._ensure_confirmation_tables()
+        s = selected
+        with self.db:
+            self.db.execute(
+                "INSERT OR IGNORE INTO selections (name, world, campaign, generation, slot, metric, found, found_episodes, created) "
+                "VALUES (?,?,?,?,?,?,?,?,?)",
+                (s.name, s.world, s.campaign, int(s.generation), int(s.slot), s.metric, _json_number(s.found), int(s.found_episodes), time.time()),
+            )
+
+    def selections(self, name: str | None = None) -> list[Selected]:
+        """The worlds a selection picked (all selections' without ``name``), in the order they were recorded."""
+        if not self._confirmation_tables():
+            return []
+        query = "SELECT name, world, campaign, generation, slot, metric, found, found_episodes FROM selections"
+        rows = self.db.execute(query + (" WHERE name=? ORDER BY id" if name else " ORDER BY id"), (name,) if name else ())
+        return [Selected(n, w, c, g, s, m, float("nan") if f is None else f, k) for n, w, c, g, s, m, f, k in rows]
 
     def export_csv(self, out: Path | str, campaign: str | None = None) -> Path:
         """One row per evaluation: campaign, generation, slot, score, mean of each metric, latent."""

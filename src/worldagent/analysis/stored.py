@@ -23,7 +23,7 @@ from worldagent.analysis import failure_rate as fr
 from worldagent.analysis.surrogate import cached_describer
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
-from worldagent.search.campaign import REPLAY_TOLERANCE
+from worldagent.search.campaign import REPLAY_TOLERANCE, campaign_stream, stored_seed
 from worldagent.store import Campaign, RunStore
 
 
@@ -63,6 +63,7 @@ class StoredEvaluate:
             )
         self.advance(len(done))
         missing = [slot for slot in range(len(z)) if slot not in done]
+        seeds = np.array([stored_seed(self.campaign, generation, slot) for slot in range(len(z))], np.int64)  # the campaign's own stream
         started = time.time()
         for slots, outcomes in self.backend.run(self.outcomes, [(part, z[part], seeds[part]) for part in split(missing, self.backend.workers)]):
             for slot, outcome in zip(slots, outcomes):
@@ -154,6 +155,7 @@ def estimate_campaign(store, setup, selection, method: str, *, worlds: int, impo
     if surrogate:
         config["pool_cache"] = str(pool_cache(store.path, fingerprint(setup.generator, setup.spec.name), seed).relative_to(store.path.parent))
     name = campaign_name(method, selection.text, seed)
+    config["stream"] = campaign_stream(name)
     campaign = store.open_campaign(name, setup.spec.name, "margin", True, method, total, seed, config, True)
     objective = Objective(setup.spec.name, selection.metrics[0], True)
     outcomes = LatentObjective(objective, setup.env, setup.policy, setup.generator, setup.repeats, setup.params, keep_worlds=False)

@@ -56,7 +56,7 @@ class Episodes:
 def scored_keys(seed: int, repeats: int) -> jax.Array:
     """The ``[repeats]`` episode keys ``LatentObjective`` gives a world evaluated with ``seed``.
 
-    A campaign evaluates world (generation, slot) with ``campaign.evaluation_seed(...)``; these
+    A campaign evaluates world (generation, slot) with ``campaign.stored_seed(...)``; these
     are that world's episode keys, so ``replay`` with them replays the scored episodes.
     """
     return jax.random.split(jax.random.key(int(seed)), int(repeats))

@@ -21,7 +21,7 @@ from worldagent.analysis.diff import regressed_ranking
 from worldagent.analysis.paired import failure_masks
 from worldagent.errors import WorldagentError
 from worldagent.events import parse_selection
-from worldagent.search.campaign import evaluation_seed
+from worldagent.search.campaign import stored_seed
 
 LOADABLE = ("worldagent", "scripted", "onnx", "callable", "sb3")  # agent kinds ``load_agent`` reads from their recorded path
 
@@ -57,16 +57,16 @@ def diff_agents(campaigns: dict[str, dict]) -> dict[str, str]:
     return found
 
 
-def replay(evaluation: Any, campaign_seed: int) -> dict:
+def replay(evaluation: Any, campaign: Any) -> dict:
     """{"seed", "episodes"}: what the World view's play takes to replay a stored world's own episodes
     (its keys are ``split(key(seed), episodes)``, as the campaign played it)."""
-    return {"seed": evaluation_seed(campaign_seed, evaluation.generation, evaluation.slot), "episodes": len(evaluation.episodes)}
+    return {"seed": stored_seed(campaign, evaluation.generation, evaluation.slot), "episodes": len(evaluation.episodes)}
 
 
-def campaign_seed(run: Any, env: str, campaign: str) -> int:
-    """The seed campaign ``campaign`` of ``env``'s store was run with."""
+def stored_campaign(run: Any, env: str, campaign: str) -> Any:
+    """Campaign ``campaign`` of ``env``'s store (``store.Campaign``: its seed and episode stream)."""
     with run.store(env) as store:
-        return next(int(c.seed) for c in store.campaigns() if c.name == campaign)
+        return store.campaign(campaign)
 
 
 def diff_view(session: Any, campaign: str | None, event: str | None, limit: int) -> dict:
@@ -95,7 +95,7 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
     fail_a, fail_b, a, b = failure_masks(evaluations, session.spec, selection)
     latents = session.latents[indices]
     shown = [m for m in dict.fromkeys((session.spec.metrics.main, *selection.metrics)) if m in a]
-    seed = campaign_seed(session.run, session.env, campaign)
+    seed = stored_campaign(session.run, session.env, campaign)
     rows = []
     for row in regressed_ranking(fail_a, fail_b, latents, latents)[:limit]:
         k, near = row["world"], row["nearest_passing"]

@@ -17,7 +17,6 @@ keeps the world with the best objective (the lowest return, when looking for fai
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -28,6 +27,7 @@ import numpy as np
 
 from worldagent.errors import WorldagentError
 from worldagent.search.optimisers import Optimiser
+from worldagent.store import world_digest
 
 RANGE_SAMPLES = 512  # prior latents whose descriptors set the grid's ranges
 
@@ -242,18 +242,9 @@ def archive_of(grid: Grid, scores: np.ndarray, measures: np.ndarray, maximize: b
     return Archive(filled, picks, scores[picks] if len(picks) else np.zeros(0), measures[picks] if len(picks) else np.zeros((0, len(grid.cells))))
 
 
-def world_key(arrays: dict[str, np.ndarray]) -> str:
-    """A hash of a stored world's arrays: equal for worlds that repair made identical."""
-    digest = hashlib.sha256()
-    for name in sorted(arrays):
-        digest.update(name.encode())
-        digest.update(np.ascontiguousarray(arrays[name]).tobytes())
-    return digest.hexdigest()
-
-
 def distinct_count(worlds: Sequence[dict[str, np.ndarray]]) -> int:
     """How many different worlds (after repair) ``worlds`` holds."""
-    return len({world_key(w) for w in worlds})
+    return len({world_digest(w) for w in worlds})
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ with an error instead of optimising on it.
 from __future__ import annotations
 
 import time
+import zlib
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -98,9 +99,24 @@ def best_evaluation(evaluations: Sequence[Evaluation], maximize: bool) -> Evalua
     return finite[int(np.argmax(scores) if maximize else np.argmin(scores))]
 
 
-def evaluation_seed(seed: int, generation: int, slot: int) -> int:
-    """The seed of one evaluation, a function of its place in the campaign only."""
-    return int(np.random.SeedSequence([seed, generation, slot]).generate_state(1)[0])
+def evaluation_seed(seed: int, generation: int, slot: int, stream: int = 0) -> int:
+    """The seed of one evaluation, a function of its place in the campaign and the campaign's ``stream`` only.
+
+    Each campaign draws from its own stream (``campaign_stream`` of its name, kept in its config), so two
+    campaigns that share a seed do not play the same episodes at the same (generation, slot); stream 0 is
+    the rule of campaigns stored before streams existed (they resume with it). Confirmation episodes come
+    from another derivation altogether (``analysis.confirm.confirmation_keys``)."""
+    return int(np.random.SeedSequence([seed, generation, slot, *([stream] if stream else [])]).generate_state(1)[0])
+
+
+def campaign_stream(name: str) -> int:
+    """The episode stream of campaign ``name`` (CRC-32 of the name, never 0)."""
+    return zlib.crc32(name.encode()) or 1
+
+
+def stored_seed(campaign: Any, generation: int, slot: int) -> int:
+    """The seed a stored campaign (``store.Campaign``) played evaluation (generation, slot) with."""
+    return evaluation_seed(campaign.seed, generation, slot, int(campaign.config.get("stream", 0)))
 
 
 def check_repeats(name: str, path: Any, evaluations: Iterable[Evaluation], repeats: int | None) -> None:
@@ -142,7 +158,13 @@ def run_campaign(
         spec.optimiser,
         spec.budget,
         spec.seed,
-        {"dim": spec.dim, **asdict(spec.config), **({"agent": spec.agent} if spec.agent else {}), **(spec.extra or {})},
+        {
+            "dim": spec.dim,
+            **asdict(spec.config),
+            **({"agent": spec.agent} if spec.agent else {}),
+            **(spec.extra or {}),
+            "stream": campaign_stream(spec.name),
+        },
         resume,
     )
     stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
@@ -169,7 +191,7 @@ def run_campaign(
                     )
                 scores[slot] = previous.score
             advance(len(z) - len(missing))
-            seeds = {s: evaluation_seed(spec.seed, generation, s) for s in missing}
+            seeds = {s: stored_seed(campaign, generation, s) for s in missing}
             batches = [(slots, z[slots], np.asarray([seeds[s] for s in slots])) for slots in split(missing, backend.workers, spec.chunk)]
             started = time.time()
             for slots, outcomes in backend.run(evaluate, batches):  # committed as each batch arrives

@@ -2,7 +2,7 @@
 
 A world set is a batch of worlds from a dataset file (``worldagent dataset``), the explorer's exports (one-world
 dataset files), or a named set an ``EnvSpec`` declares (``world_sets``). Its campaign is stored as every other:
-world i is slot i of generation 0, played with the keys of ``evaluation_seed(seed, 0, i)``, committed batch by
+world i is slot i of generation 0, played with the keys of ``stored_seed(campaign, 0, i)``, committed batch by
 batch, resumed by a rerun. Worlds have no latent unless a generator places them (the encoder's mean of each
 world's cells), which is what puts them on the explorer's map.
 """
@@ -24,8 +24,8 @@ from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
 from worldagent.progress import progress_bar
-from worldagent.search.campaign import Outcome, check_repeats, evaluation_seed
-from worldagent.search.objectives import Objective, play_outcomes
+from worldagent.search.campaign import Outcome, campaign_stream, check_repeats, stored_seed
+from worldagent.search.objectives import Objective, play_outcomes, search_keys
 from worldagent.store import Evaluation, RunStore
 
 SET_BATCH = 64  # worlds evaluated (and committed) at a time
@@ -135,16 +135,17 @@ class GivenWorlds:
     Args:
         objective: the metric that scores each world.
         env, params: the environment; policy: the agents; worlds: the batched worlds; repeats: episodes per world.
+        keys_of: ``(seed, repeats) -> keys``: a search's episodes (default) or confirmation's.
     """
 
-    def __init__(self, objective: Objective, env: Any, policy: Any, worlds: Any, repeats: int, params: Any):
+    def __init__(self, objective: Objective, env: Any, policy: Any, worlds: Any, repeats: int, params: Any, keys_of: Any = search_keys):
         self.objective, self.env, self.policy, self.worlds = objective, env, policy, worlds
-        self.repeats, self.params = int(repeats), params
+        self.repeats, self.params, self.keys_of = int(repeats), params, keys_of
 
     def __call__(self, indices: np.ndarray, seeds: np.ndarray) -> list[Outcome]:
         picks = np.asarray(indices, np.int64).reshape(-1)
         worlds = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[picks], self.worlds)
-        return play_outcomes(self.objective, self.env, self.policy, worlds, seeds, self.repeats, self.params)
+        return play_outcomes(self.objective, self.env, self.policy, worlds, seeds, self.repeats, self.params, keys_of=self.keys_of)
 
 
 def check_placement(store: RunStore, name: str, placed: str) -> None:
@@ -177,7 +178,7 @@ def run_given(
     Args:
         store: the run store; name: the campaign.
         evaluate: ``GivenWorlds`` over ``given.worlds``.
-        seed: the episodes' seed (world i plays with ``evaluation_seed(seed, 0, i)``'s keys).
+        seed: the episodes' seed (world i plays with ``stored_seed(campaign, 0, i)``'s keys).
         agent: ``agents.policy.agent_record`` of the agents (a campaign resumes only with the same files).
         latents: f64[W, dim] where a generator placed the worlds, or None (stored without latents).
         backend: where batches are evaluated (``evaluation.backends``; None: here).
@@ -189,6 +190,7 @@ def run_given(
         "worlds": {"tag": given.tag, "count": len(given), "fingerprint": given.fingerprint},
         "latents": placed,
         **({"agent": agent} if agent else {}),
+        "stream": campaign_stream(name),
     }
     spec = evaluate.objective
     campaign = store.open_campaign(name, spec.env, spec.metric, spec.maximize, OPTIMISER, len(given), seed, config, resume=True)
@@ -197,7 +199,7 @@ def run_given(
     done = {e.slot for e in stored}
     missing = [i for i in range(len(given)) if i not in done]
     backend = backend or LocalBackend()
-    seeds = {slot: evaluation_seed(seed, 0, slot) for slot in missing}
+    seeds = {slot: stored_seed(campaign, 0, slot) for slot in missing}
     batches = [
         (slots, np.asarray(slots, np.float64)[:, None], np.array([seeds[s] for s in slots])) for slots in split(missing, backend.workers, SET_BATCH)
     ]

@@ -102,13 +102,27 @@ class LatentObjective:
         return play_outcomes(self.objective, self.env, self.policy, worlds, seeds, self.repeats, self.params, self.keep_worlds)
 
 
+def search_keys(seed: int, repeats: int) -> jax.Array:
+    """The ``[repeats]`` episode keys of a world a search scores with ``seed`` (``campaign.evaluation_seed``)."""
+    return jax.random.split(jax.random.key(int(seed)), int(repeats))
+
+
 def play_outcomes(
-    objective: Objective, env, policy, worlds: Any, seeds: np.ndarray, repeats: int, params: Any, keep_worlds: bool = True
+    objective: Objective,
+    env,
+    policy,
+    worlds: Any,
+    seeds: np.ndarray,
+    repeats: int,
+    params: Any,
+    keep_worlds: bool = True,
+    keys_of: Any = search_keys,
 ) -> list[Outcome]:
     """The outcome of each of ``worlds`` (batched, one per seed): the world played ``repeats`` times with its seed's
-    keys, scored by the objective's metric averaged over those episodes (raw and derived metrics kept per episode)."""
+    keys (``keys_of(seed, repeats)``: a search's, or ``analysis.confirm.confirmation_keys``), scored by the
+    objective's metric averaged over those episodes (raw and derived metrics kept per episode)."""
     spec = registry.get(objective.env)
-    keys = jnp.stack([jax.random.split(jax.random.key(int(seed)), repeats) for seed in seeds])
+    keys = jnp.stack([keys_of(int(seed), repeats) for seed in seeds])
     metrics = spec.metrics.with_derived(evaluate(env, policy, worlds, repeats, None, params, keys=keys), params)
     scores = np.asarray(metrics[objective.metric], np.float64).mean(axis=1)
     outcomes = []

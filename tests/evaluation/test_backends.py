@@ -152,3 +152,18 @@ def test_many_runs_trained_on_ray_equal_those_trained_here_and_resume_there(tmp_
         assert a.episodes == b.episodes >= 8
         for x, y in zip(jax.tree_util.tree_leaves(a.agent.params), jax.tree_util.tree_leaves(b.agent.params)):
             np.testing.assert_array_equal(x, y)
+
+
+def test_a_confirmation_on_ray_stores_the_rows_of_one_made_here(tmp_path, cluster, racing_generator):
+    import dataclasses
+
+    from worldagent.analysis.confirm import confirm
+
+    setup = experiments.setup("racing", "driver", racing_generator, repeats=2)
+    rows = {}
+    for name, backend in (("local", None), ("ray", cluster)):
+        with RunStore(tmp_path / name) as store:
+            found = experiments.random_evaluation(store, setup, "return", worlds=10, seed=0, progress=False)
+            confirm(store, dataclasses.replace(setup, backend=backend), found, name="all", repeats=4, seed=0, progress=False)
+            rows[name] = sorted((c.world, c.seed, c.repeats, str(c.episodes)) for c in store.confirmations())
+    assert rows["ray"] == rows["local"] and len(rows["local"]) > 1

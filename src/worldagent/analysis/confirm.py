@@ -117,18 +117,21 @@ def event_values(episodes: Sequence[dict], selection: Any) -> np.ndarray:
     return np.logical_and.reduce(holds).astype(np.float64) if holds else np.zeros(len(episodes))
 
 
-def clause_confirmed(clause: Any, interval: Interval) -> bool:
-    """``clause`` holds beyond doubt on a confirmed interval: the whole interval on its side of the threshold
-    (``==``: every episode at the value; ``!=``: the value outside the interval)."""
+def clause_confirmed(clause: Any, values: np.ndarray) -> bool:
+    """``clause`` holds beyond doubt on fresh episodes ``values``: the whole 95% interval of their mean on its
+    side of the threshold (``==``: every episode at the value; ``!=``: the value outside the interval)."""
+    values = np.asarray(values, np.float64)
+    interval = mean_interval(values)
     if interval.n == 0 or not np.isfinite(interval.mean):
         return False
     number = clause.number
+    if clause.op == "==":
+        return bool(clause.holds(values[np.isfinite(values)]).all())
     return {
         ">": interval.low > number,
         ">=": interval.low >= number,
         "<": interval.high < number,
         "<=": interval.high <= number,
-        "==": bool(clause.holds(np.array([interval.low]))[0] and clause.holds(np.array([interval.high]))[0]),
         "!=": not (interval.low <= number <= interval.high),
     }[clause.op]
 
@@ -163,7 +166,7 @@ class ConfirmedWorld:
 
     def holds(self, selection: Any) -> bool:
         """The world is confirmed to have the property: every clause's confirmed interval beyond its threshold."""
-        return all(clause_confirmed(clause, self.confirmed(clause.metric)) for clause in selection.clauses)
+        return all(clause_confirmed(clause, metric_values(self.episodes, clause.metric)) for clause in selection.clauses)
 
     def worse_than(self, selection: Any, baseline: float) -> bool:
         """Its fresh episodes fail more often than ``baseline`` (the agent's rate on random worlds), beyond doubt."""

@@ -15,8 +15,8 @@ from worldagent.analysis.confirm import (
     confirmed_summary,
     mean_interval,
 )
-from worldagent.events import parse_selection
 from worldagent.evaluation.backends import LocalBackend
+from worldagent.events import parse_selection
 from worldagent.search.campaign import CampaignSpec, Outcome, evaluation_seed, run_campaign, stored_seed
 from worldagent.search.objectives import search_keys
 from worldagent.search.optimisers import OptimiserConfig

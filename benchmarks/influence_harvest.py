@@ -2,19 +2,29 @@
 
     python benchmarks/influence_harvest.py                  # 5 seeds x 5,000 episodes, 500 evaluation worlds x 8
     python benchmarks/influence_harvest.py --seeds 0 1 --episodes 1000 --eval-worlds 100 --work runs/influence-small
+    # issue 50 item 6 at the quick preset's scale: its G(z) and given agents, the selection confirmed
+    python benchmarks/influence_harvest.py --generator runs/quick/harvest/generator --given-agent runs/quick/harvest/agent \
+        --episodes 1000 --candidates 200 --search-budget 210 --eval-worlds 1000 --confirm 32 --work runs/influence-harvest-quick \
+        --results benchmarks/results/influence-harvest-confirmed.json
 
 Steps, each cached under ``--work`` (a killed run resumes where it stopped):
 
-1. the paper's dataset of 10,000 procedural maps and the generator G(z) (harvest's ``paper`` preset);
-2. the given agents: four DQNs, agent 0 may TAG, trained 5,000 episodes on the dataset;
+1. the paper's dataset of 10,000 procedural maps and the generator G(z) (harvest's ``paper`` preset),
+   or ``--generator``'s;
+2. the given agents: four DQNs, agent 0 may TAG, trained 5,000 episodes on the dataset, or ``--given-agent``;
 3. ``experiments.influence``: the given agents play ``--candidates`` random G(z) worlds x 8;
-   those with ``conflict == 0`` (the paper's selection) form the influenced distribution; per
+   those with ``conflict == 0`` (the paper's selection) form the influenced distribution (with
+   ``--confirm N``, only those that keep it on N fresh episodes each: ``influence.confirmation``); per
    seed, fresh default agents train on G(z) and influenced agents on the selected worlds; all
    play the same ``--eval-worlds`` random G(z) worlds x 8;
 4. who collects what: every trained agent's per-agent returns on ``--diagnostic-worlds`` random
-   G(z) worlds, split by whether walls cut the tagger (agent 0) off from another agent.
+   G(z) worlds, split by whether walls cut the tagger (agent 0) off from another agent (0: skipped);
+5. the selected worlds replayed: every trained agent on each influenced training world,
+   ``--replay-repeats`` fresh episodes (the same keys for all, not those that confirmed the worlds):
+   the failure event's and the selection's per-episode rates, influenced against default, pooled
+   over seeds and paired by world (``analysis.diff.pooled_difference``).
 
-Writes ``benchmarks/results/influence-harvest.json``: per-seed values, means with 95% intervals
+Writes ``benchmarks/results/influence-harvest.json`` (``--results``): per-seed values, means with 95% intervals
 (Student t over seeds), whether the intervals overlap, the selection, the budgets, the machine
 and the paper's numbers.
 """
@@ -39,9 +49,12 @@ from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
+from worldagent.events import parse_selection  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
 from worldagent.influence.cache import load_influenced_worlds  # noqa: E402
+from worldagent.influence.confirmation import DEFAULT_REPEATS, confirmation_line, trained_on_selected  # noqa: E402
 from worldagent.influence.experiment import trained_policies  # noqa: E402
+from worldagent.influence.statistics import json_safe  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator, save_generator  # noqa: E402
 from worldagent.worlds.quality import figures  # noqa: E402
@@ -52,8 +65,11 @@ PAPER = SPEC.presets["paper"]
 DIAGNOSTIC_REPEATS = 2
 
 
-def dataset_and_generator(work: Path, progress: bool) -> Path:
-    """The paper preset's dataset and G(z) under ``work`` (made once); returns the generator directory."""
+def dataset_and_generator(work: Path, progress: bool, given: Path | None = None) -> Path:
+    """``given`` if it holds a generator, else the paper preset's dataset and G(z) under ``work`` (made once);
+    returns the generator directory."""
+    if given is not None and (given / "generator.json").is_file():
+        return given
     data_path, gen_dir = work / "dataset.npz", work / "generator"
     if not data_path.exists():
         make_dataset(SPEC, PAPER["worlds"], 0, progress=progress).save(data_path)
@@ -141,15 +157,26 @@ def main(argv=None) -> dict:
     parser.add_argument("--diagnostic-worlds", type=int, default=300)
     parser.add_argument("--work", type=Path, default=Path("runs/influence-harvest"))
     parser.add_argument("--runs-per-program", type=int, default=None, help="agents trained as one program at most (default: from the device)")
+    parser.add_argument("--generator", type=Path, default=None, help="a generator directory to use (default: the paper preset's, made under --work)")
+    parser.add_argument("--given-agent", type=Path, default=None, help="the agents whose conflict selects the worlds (default: trained under --work)")
+    parser.add_argument(
+        "--confirm", type=int, default=DEFAULT_REPEATS, help="fresh episodes each selected world is replayed on (0: the raw selection)"
+    )
+    parser.add_argument(
+        "--replay-repeats", type=int, default=16, help="fresh episodes of every trained agent on each influenced world (step 5; 0: skipped)"
+    )
+    parser.add_argument("--results", type=Path, default=None, help="the result file (default benchmarks/results/influence-harvest.json)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     progress, started = not args.quiet, time.perf_counter()
     args.work.mkdir(parents=True, exist_ok=True)
     options = SPEC.check_options(SPEC.reproduce_options)
-    gen_dir = dataset_and_generator(args.work, progress)
-    agent_dir = given_agents(args.work, options, args.episodes, progress)
+    gen_dir = dataset_and_generator(args.work, progress, args.generator)
+    if args.given_agent is not None and not (args.given_agent / "policy").is_dir():
+        parser.error(f"--given-agent {args.given_agent}: not a trained agent (no policy/)")
+    agent_dir = args.given_agent or given_agents(args.work, options, args.episodes, progress)
     setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=options)
-    influence_dir = args.work / "influence"
+    influence_dir = args.work / ("influence" if args.confirm == 0 else f"influence-confirm{args.confirm}")
     result = experiments.influence(
         influence_dir,
         setup,
@@ -161,8 +188,17 @@ def main(argv=None) -> dict:
         eval_worlds=args.eval_worlds,
         runs_per_program=args.runs_per_program,
         progress=progress,
+        confirm=args.confirm,
     )
-    quality = json.loads((gen_dir / "quality.json").read_text())
+    quality_file = gen_dir / "quality.json"
+    quality = json.loads(quality_file.read_text()) if quality_file.is_file() else None
+    events = {
+        "failure": parse_selection(SPEC.failure, SPEC.name).resolve(SPEC.name),
+        "selection": parse_selection(SPEC.selection, SPEC.name).resolve(SPEC.name),
+    }
+    replayed = (
+        trained_on_selected(influence_dir, setup, result, events, repeats=args.replay_repeats, progress=progress) if args.replay_repeats > 0 else None
+    )
     figures = {
         "command": "python benchmarks/influence_harvest.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "options": {k: list(v) if isinstance(v, tuple) else v for k, v in options.items()},
@@ -175,16 +211,22 @@ def main(argv=None) -> dict:
             "search_budget": args.search_budget,
             "eval_worlds": args.eval_worlds,
             "repeats": setup.repeats,
+            "confirm": args.confirm,
+            "replay_repeats": args.replay_repeats,
         },
+        "generator": str(gen_dir),
+        "given_agent": str(agent_dir),
         "selection": result["selection"],
         "worlds": result["worlds"],
+        "confirmation": result["worlds"].get("confirmation"),  # how many of the raw selection kept the property on fresh episodes
+        "selected_worlds_fresh": replayed,  # every trained agent on the influenced worlds, fresh keys, paired and pooled
         "per_seed": result["per_seed"],
         "summary": result["summary"],
         "intervals": comparison(result["summary"]),
         "pooled_influenced_vs_default": pooled_influenced_vs_default(influence_dir),  # paired by world, pooled over seeds
         "paper": {"conflict": {"default": 0.51, "influenced": 0.05}, "equality": {"default": 0.33, "influenced": 0.78}},
         "selected_structure": selected_structure(influence_dir),  # against generator_quality's G(z) means
-        "who_collects_what": who_collects_what(influence_dir, setup, args.diagnostic_worlds),
+        "who_collects_what": who_collects_what(influence_dir, setup, args.diagnostic_worlds) if args.diagnostic_worlds > 0 else None,
         "generator_quality": quality,
         "wall_seconds": round(time.perf_counter() - started, 1),
         "influence_wall_seconds": result["wall_seconds"],
@@ -192,8 +234,20 @@ def main(argv=None) -> dict:
     }
     machine = describe_machine()
     payload = {"benchmark": "influence-harvest", "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "machine": machine, **figures}
-    path = write_text(RESULTS / "influence-harvest.json", json.dumps(payload, indent=2) + "\n")
+    path = write_text(args.results or RESULTS / "influence-harvest.json", json.dumps(json_safe(payload), indent=2) + "\n")
     lines = [f"{result['worlds']['selected']} of {result['worlds']['tried']} worlds selected ({SPEC.selection}); {machine['cores']} cores"]
+    if figures["confirmation"]:
+        lines.append(confirmation_line(figures["confirmation"]))
+    for key, row in (replayed or {}).get("pooled", {}).items():
+        lines.append(
+            f"selected worlds, fresh keys, {key}: default {row['base']:.4f}, influenced {row['arm']:.4f}, {row['difference']:+.4f} [{row['low']:+.4f}, {row['high']:+.4f}]"
+        )
+    for key in ("p_failure", "mean_conflict"):
+        row = figures["pooled_influenced_vs_default"].get(key)
+        if row:
+            lines.append(
+                f"{args.eval_worlds} fresh worlds, {key}: default {row['base']:.4f}, influenced {row['arm']:.4f}, {row['difference']:+.4f} [{row['low']:+.4f}, {row['high']:+.4f}]"
+            )
     for metric, by_label in result["summary"].items():
         d, i = by_label["default"], by_label["influenced"]
         lines.append(

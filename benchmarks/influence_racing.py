@@ -9,6 +9,10 @@
     # the same, its default arm the curriculum benchmark's dr agents (that regime, G(z) and seeds 0-4)
     python benchmarks/influence_racing.py --regime ours --selection ours --generator runs/quick/racing/generator \\
         --default-agents runs/curriculum-racing/dr/s{0,1,2,3,4} --work runs/influence-racing-ours
+    # issue 50 item 6 at the quick preset's scale: its agent (and its options), G(z) and selection, confirmed
+    python benchmarks/influence_racing.py --algo ppo --given-agent runs/quick/racing/agent --generator runs/quick/racing/generator \
+        --selection "crash_rate > 0" --episodes 10000 --candidates 500 --search-budget 0 --atlas-budget 105 --skip-census \
+        --eval-worlds 1000 --seeds 0 1 2 --confirm 32 --work runs/influence-racing-quick --results benchmarks/results/influence-racing-confirmed.json
     # smoke (tiny budgets; not a measurement, write it elsewhere):
     python benchmarks/influence_racing.py --regime ours --selection ours --episodes 32 --eval-worlds 16 --seeds 0 1 \\
         --candidates 16 --atlas-budget 105 --search-budget 105 --heldout-search-budget 105 \\
@@ -26,17 +30,20 @@ another regime or budget than the default works under ``--work/regime-<name>-e<e
    made under ``--work``;
 2. the given agent, whose failures select the worlds: ``--algo`` trained ``--episodes`` on the
    procedural dataset pool (paper §5.3), or ``--given-agent``, one already trained in the regime
-   (e.g. the default arm's seed 0, trained on G(z); its steps then live under ``given-<path>/``);
+   (e.g. the default arm's seed 0, trained on G(z); its steps then live under ``given-<path>/``; both arms
+   then train with the env options it was trained with, e.g. the quick preset's ``route`` observation);
 3. the paper's selection, ``crash_rate > 0.5``: how many *distinct* tracks the given agent
    crashes on in more than half of its episodes, among ``--candidates`` random worlds and in a
    crash-maximising CMA-ME atlas of ``--atlas-budget`` worlds; and a census of every dataset
-   track (``repeats`` episodes each): racing's repair maps every G(z) to its nearest dataset
-   track, so the census bounds how many distinct tracks any search can select;
+   track (``repeats`` episodes each; ``--skip-census``: not made): racing's repair maps every G(z) to its
+   nearest dataset track, so the census bounds how many distinct tracks any search can select;
 4. ``experiments.influence`` with ``--selection``: ``paper`` is the paper's ``crash_rate > 0.5``;
    ``ours`` the agent's own failure, ``lap_completed < 0.5``; ``auto`` (the default) the paper's
    when step 3 found at least ``MIN_DISTINCT`` tracks, else ``crash_rate > 0`` (every track it
    crashed on at all); any other text is a selection as written. Candidates are random worlds
    plus an atlas search (``--search-budget``) toward the selection, which collects distinct tracks;
+   with ``--confirm N`` only the selected worlds that keep the property on N fresh episodes each
+   are trained on (``influence.confirmation``; recorded: how many of the raw selection survived);
 5. speed: every trained agent's mean steps per lap (episodes that lapped) on the evaluation worlds;
 6. held out (``--heldout``; ``auto``: with ``--selection ours``): for each seed k, the worlds
    meeting the selection for seed k's *default* agent, among the evaluation worlds and in an
@@ -46,7 +53,9 @@ another regime or budget than the default works under ``--work/regime-<name>-e<e
    (the default arm trains on G(z), where any track may come up);
 7. the selected tracks replayed: every trained agent, 8 episodes on each distinct track of the
    influenced training worlds (the same keys for all): whether they are hard for agents other than
-   the one that selected them, and whether the influenced agents learned them.
+   the one that selected them, and whether the influenced agents learned them; and the same on
+   ``--replay-repeats`` episodes of the confirmation key stream (not the keys that kept the worlds),
+   influenced against default pooled over seeds and paired by world (``analysis.diff.pooled_difference``).
 
 Records the run in ``benchmarks/results/influence-racing.json`` (``--results`` to choose) under
 ``runs["<regime>-e<episodes>-<selection>"]``, beside the other regimes' runs: the regime and every setting
@@ -76,18 +85,20 @@ from influence_pooled import pooled_influenced_vs_default  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
 from racing_regime import OPTIONS, REPEATS, episode_summary, in_window, regimes  # noqa: E402
 from worldagent import experiments  # noqa: E402
+from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.agents.training import train  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.evaluation.backends import BACKENDS, make_backend  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
-from worldagent.influence.cache import load_influenced_worlds  # noqa: E402
+from worldagent.influence.cache import config_dict, load_influenced_worlds  # noqa: E402
+from worldagent.influence.confirmation import DEFAULT_REPEATS, confirmation_line, trained_on_selected  # noqa: E402
 from worldagent.influence.experiment import trained_policies  # noqa: E402
 from worldagent.influence.statistics import episode_values, json_safe, mean_and_ci, summarise  # noqa: E402
 from worldagent.influence.worlds import search_direction  # noqa: E402
-from worldagent.search.atlas import distinct_count, world_key  # noqa: E402
-from worldagent.store import RunStore  # noqa: E402
+from worldagent.search.atlas import distinct_count  # noqa: E402
+from worldagent.store import RunStore, world_digest  # noqa: E402
 from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
 from worldagent.worlds.generator import build_generator, load_generator, save_generator  # noqa: E402
 from worldagent.worlds.vae import VAEConfig, train_vae  # noqa: E402
@@ -165,6 +176,12 @@ def paper_selection_reach(work: Path, setup, candidates: int, atlas_budget: int,
         }
 
 
+def agent_options(agent_dir: Path) -> dict:
+    """The env options a saved agent was trained with (its ``run.json``), or the regime's ``OPTIONS``."""
+    record = agent_dir / "run.json"
+    return json.loads(record.read_text()).get("options") or OPTIONS if record.is_file() else OPTIONS
+
+
 def dataset_census(gen_dir: Path, setup, repeats: int, cache: Path) -> dict:
     """How many of the generator's dataset tracks (G(z)'s whole range after repair) meet each crash-rate threshold
     (kept in ``cache``: 10,000 tracks x 8 episodes is minutes of work)."""
@@ -229,7 +246,7 @@ def heldout_evaluation(influence_dir: Path, setup, result: dict, selection_text:
     metric = selection.resolve(SPEC.name).metrics[0]
     dirs = {name: influence_dir / "agents" / name / record["policy"] for name, record in result["agents"].items()}
     policies = trained_policies(dirs, SPEC, greedy=False)
-    trained_on = {world_key(w) for w in per_world(load_influenced_worlds(influence_dir, SPEC)[0])}
+    trained_on = {world_digest(w) for w in per_world(load_influenced_worlds(influence_dir, SPEC)[0])}
     failed = result["failed_training"]
     per_seed: dict[str, dict[str, dict]] = {"default": {}, "influenced": {}}
     sets = {}
@@ -254,7 +271,7 @@ def heldout_evaluation(influence_dir: Path, setup, result: dict, selection_text:
                 )
                 searched = held.evaluations(atlas_name, with_worlds=True)
                 worlds += [e.world for e, hit in zip(searched, selection.mask(searched)) if hit and e.world is not None]
-            unique = {world_key(w): w for w in worlds}
+            unique = {world_digest(w): w for w in worlds}
             kept = [w for key, w in unique.items() if key not in trained_on]
             sets[str(target)] = {
                 "source_seed": source,
@@ -296,7 +313,7 @@ def selected_world_rates(influence_dir: Path, setup, result: dict) -> dict:
     """Step 7: every trained agent on the influenced training worlds (one per distinct track, 8 episodes,
     one key for all): are the selected tracks hard for agents other than the one that selected them,
     and did the influenced agents learn to drive them?"""
-    unique = {world_key(w): w for w in per_world(load_influenced_worlds(influence_dir, SPEC)[0])}
+    unique = {world_digest(w): w for w in per_world(load_influenced_worlds(influence_dir, SPEC)[0])}
     dirs = {name: influence_dir / "agents" / name / record["policy"] for name, record in result["agents"].items()}
     policies = trained_policies(dirs, SPEC, greedy=False)
     batch, key = SPEC.stack_worlds(list(unique.values())), jax.random.key(SELECTED_SEED)
@@ -372,9 +389,18 @@ def main(argv=None) -> dict:
     parser.add_argument(
         "--backend", choices=BACKENDS, default="local", help="ray: each program of agents trains on a worker of a local Ray cluster, side by side"
     )
+    parser.add_argument(
+        "--confirm", type=int, default=DEFAULT_REPEATS, help="fresh episodes each selected world is replayed on (0: the raw selection)"
+    )
+    parser.add_argument(
+        "--replay-repeats", type=int, default=16, help="fresh episodes of every trained agent on each influenced world (step 7, pooled; 0: skipped)"
+    )
+    parser.add_argument("--skip-census", action="store_true", help="skip step 3's census of every dataset track (10,000 x 8 episodes)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     progress, started = not args.quiet, time.perf_counter()
+    if args.confirm < 0 or args.replay_repeats < 0:
+        parser.error("--confirm and --replay-repeats take 0 or more episodes")
     regime = regimes()[args.regime]
     if args.algo != "acktr" and regime.overrides:
         parser.error(f"--regime {regime.name} sets ACKTR settings; use --algo acktr or --regime ours")
@@ -383,7 +409,10 @@ def main(argv=None) -> dict:
     if args.default_agents and len(args.default_agents) != len(args.seeds):
         parser.error(f"--default-agents: give one agent per seed ({len(args.seeds)}), in --seeds' order")
     episodes = regime.budget(args.episodes)
+    options = agent_options(args.given_agent) if args.given_agent is not None else OPTIONS
     config = regime.config(args.episodes, args.algo)
+    if options != OPTIONS:  # the given agent's observation: both arms train with what it saw
+        config = training_config(SPEC, args.algo, episodes, options=options, **dict(regime.overrides))
     default_run = regime.name == "ours" and args.episodes is None
     base = args.work if default_run else args.work / f"regime-{regime.name}-e{episodes}"
     base.mkdir(parents=True, exist_ok=True)
@@ -395,15 +424,16 @@ def main(argv=None) -> dict:
         base.mkdir(parents=True, exist_ok=True)
     else:
         agent_dir = given_agent(base, args.algo, config, progress)
-    setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=OPTIONS, backend=make_backend(args.backend))
+    setup = experiments.setup(SPEC, str(agent_dir), gen_dir, options=options, backend=make_backend(args.backend))
     reach = paper_selection_reach(base, setup, args.candidates, args.atlas_budget, progress)
-    reach["dataset_census"] = dataset_census(gen_dir, setup, setup.repeats, base / "dataset-census.json")
+    reach["dataset_census"] = None if args.skip_census else dataset_census(gen_dir, setup, setup.repeats, base / "dataset-census.json")
     enough = reach["random"]["distinct"] + reach["atlas"]["distinct"] >= MIN_DISTINCT  # an upper bound: the two may share tracks
     if args.selection == "auto":
         selection = PAPER_SELECTION if enough else FALLBACK_SELECTION
     else:
         selection = SELECTIONS.get(args.selection, args.selection)
     tag = "" if args.selection == "auto" else "-" + (args.selection if args.selection in SELECTIONS else slug(selection))
+    tag += f"-confirm{args.confirm}" if args.confirm else ""  # another training distribution: its own directory and record
     influence_dir = base / f"influence-{args.algo}{tag}"
     if args.default_agents:
         link_default_agents(influence_dir, args.default_agents, args.seeds, source=f"linked from {args.default_agents[0]} and on")
@@ -421,6 +451,7 @@ def main(argv=None) -> dict:
         runs_per_program=args.runs_per_program,
         config=config,
         progress=progress,
+        confirm=args.confirm,
     )
     with RunStore(influence_dir) as store:
         selected = distinct_failing(store, result["worlds"]["campaigns"], experiments.failure_selection(selection, SPEC.name))
@@ -435,15 +466,19 @@ def main(argv=None) -> dict:
     heldout = args.heldout == "on" or (args.heldout == "auto" and selection == OUR_SELECTION)
     held = heldout_evaluation(influence_dir, setup, result, selection, args.heldout_search_budget, progress) if heldout else None
     replayed = selected_world_rates(influence_dir, setup, result)
+    events = {"failure": experiments.failure_selection(SPEC.failure, SPEC.name).resolve(SPEC.name)}
+    events["selection"] = experiments.failure_selection(selection, SPEC.name).resolve(SPEC.name)
+    fresh = trained_on_selected(influence_dir, setup, result, events, repeats=args.replay_repeats, progress=progress) if args.replay_repeats else None
     given_why = SPEC.training_check({"lap_completed": reach["given_agent"]["lap_rate"]})
     failed_training = {**({"given-s0": given_why} if given_why else {}), **result["failed_training"]}
     reward = summary["return"]
     figures = {
         "command": "python benchmarks/influence_racing.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "algo": args.algo,
-        "options": OPTIONS,
+        "options": options,
         "regime": regime.record(args.episodes, args.algo),
-        "settings": SPEC.option_overrides(args.algo, SPEC.check_options(OPTIONS)),
+        "settings": SPEC.option_overrides(args.algo, SPEC.check_options(options)),
+        "training_config": config_dict(config),
         "budgets": {
             "episodes": episodes,
             "seeds": args.seeds,
@@ -453,6 +488,9 @@ def main(argv=None) -> dict:
             "eval_worlds": args.eval_worlds,
             "repeats": setup.repeats,
             "heldout_search_budget": args.heldout_search_budget if heldout else None,
+            "confirm": args.confirm,
+            "replay_repeats": args.replay_repeats,
+            "census": not args.skip_census,
         },
         "given_agent": {
             **reach["given_agent"],
@@ -469,6 +507,8 @@ def main(argv=None) -> dict:
             "min_distinct": MIN_DISTINCT,
         },
         "worlds": result["worlds"],
+        "confirmation": result["worlds"].get("confirmation"),  # how many of the raw selection kept the property on fresh episodes
+        "selected_worlds_fresh": fresh,  # every trained agent on the influenced worlds, fresh keys, paired and pooled
         "per_seed": {**result["per_seed"], "steps_per_lap": speed},
         "summary": summary,
         "intervals": comparison(summary),
@@ -507,6 +547,18 @@ def main(argv=None) -> dict:
     for metric in ("crash_rate", "lap_rate"):
         d, i = replayed["summary"][metric]["default"], replayed["summary"][metric]["influenced"]
         lines.append(f"selected tracks replayed, {metric}: {d['mean']:.4f} ± {d['ci95']:.4f} -> {i['mean']:.4f} ± {i['ci95']:.4f}")
+    if figures["confirmation"]:
+        lines.append(confirmation_line(figures["confirmation"]))
+    for key, row in (fresh or {}).get("pooled", {}).items():
+        lines.append(
+            f"selected worlds, fresh keys, {key}: default {row['base']:.4f}, influenced {row['arm']:.4f}, "
+            f"{row['difference']:+.4f} [{row['low']:+.4f}, {row['high']:+.4f}]"
+        )
+    pooled = figures["pooled_influenced_vs_default"]["p_failure"]
+    lines.append(
+        f"{args.eval_worlds} fresh worlds, p_failure: default {pooled['base']:.4f}, influenced {pooled['arm']:.4f}, "
+        f"{pooled['difference']:+.4f} [{pooled['low']:+.4f}, {pooled['high']:+.4f}]"
+    )
     if failed_training:
         lines.append("failed training: " + ", ".join(failed_training))
     print("\n".join(lines) + f"\nrecorded in {path}")

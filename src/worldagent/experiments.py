@@ -571,11 +571,13 @@ def influence(
     progress: bool = True,
     runs_per_program: int | None = None,
     rounds: int = 1,
+    confirm: int = 0,
 ) -> dict:
     """Train agents on worlds with a property and compare them with default training (paper §6.2, Figure 8).
 
     ``influence.experiment.influence`` with the setup's env, agents, generator, options,
-    repeats and backend (where the agents train); see it for the arguments. ``algo`` None: ``spec.default_algorithm``.
+    repeats and backend (where the agents train); see it for the arguments. ``algo`` None: ``spec.default_algorithm``;
+    ``confirm``: fresh episodes per selected world, only those that keep the property trained on (0: the raw selection).
 
     Returns:
         The content of ``run_dir/influence.json``.
@@ -606,6 +608,7 @@ def influence(
         runs_per_program=runs_per_program,
         rounds=rounds,
         backend=setup.backend,
+        confirm=confirm,
     )
 
 

@@ -98,6 +98,7 @@ def influence_command(
     runs_per_program: int | None = None,
     backend_name: str = "local",
     ray_address: str | None = None,
+    confirm: int = 32,
 ) -> None:
     """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
     from worldagent.agents.algorithms import parse_settings, training_config
@@ -109,6 +110,8 @@ def influence_command(
     check_training_episodes(episodes)
     check_seed(seed)
     check_search(search)
+    if confirm < 0:
+        raise WorldagentError(f"--confirm is {confirm}; pass the fresh episodes each selected world is replayed on, or 0 for the raw selection.")
     if rounds < 1:
         raise WorldagentError(f"--rounds is {rounds}; pass 1 (the paper's single retrain) or more.")
     if runs_per_program is not None and runs_per_program < 1:
@@ -121,6 +124,7 @@ def influence_command(
     from rich.console import Console
 
     from worldagent import experiments
+    from worldagent.influence.confirmation import confirmation_line
     from worldagent.reports.influence import influence_figure
 
     where = backend(backend_name, ray_address)
@@ -144,19 +148,26 @@ def influence_command(
         progress=not quiet,
         runs_per_program=runs_per_program,
         rounds=rounds,
+        confirm=confirm,
     )
     figure = influence_figure(result, experiments.example_worlds(out, setup.spec), setup.spec, out / "influence.png")
     Console().print(result_table(result))
     counts = result["worlds"]
+    if "confirmation" in counts:
+        console.print(confirmation_line(counts["confirmation"]))
     console.print(
-        f"{counts['selected']} of {counts['tried']} worlds have {selection.describe()}; "
+        f"{counts['selected']} of {counts['tried']} worlds have {selection.describe()}{' (confirmed)' if 'confirmation' in counts else ''}; "
         f"{2 * seeds} agents compared on {eval_worlds} worlds x {repeats} episodes (this run: {result['wall_seconds']['total']:.0f} s) "
         f"-> {figure}, {out / RESULT_FILE}"
     )
     for later in result.get("rounds", []):
         Console().print(result_table({**result, **later}, f"round {later['round']}: "))
         found = later["worlds"]
-        new = ", ".join(f"s{s}: {n} found, {found['added'][s]} new, {found['training_worlds'][s]} in all" for s, n in found["selected"].items())
+        survived = found.get("confirmation", {})
+        kept = {s: f" ({survived[s]['survived']} of {survived[s]['selected']} confirmed)" if s in survived else "" for s in found["selected"]}
+        new = ", ".join(
+            f"s{s}: {n} found{kept[s]}, {found['added'][s]} new, {found['training_worlds'][s]} in all" for s, n in found["selected"].items()
+        )
         console.print(f"round {later['round']}: worlds with {selection.describe()} ({new}) -> {out / later['dir'] / RESULT_FILE}")
 
 
@@ -195,6 +206,12 @@ def register(app: typer.Typer) -> None:
         ),
         backend_name: str = typer.Option("local", "--backend", help="Where the agents train: local, or ray (each program a task on a worker)."),
         ray_address: str = ray_address_flag(),
+        confirm: int = typer.Option(
+            32,
+            "--confirm",
+            help="Fresh episodes each selected world is replayed on; only those that keep the property on them are trained on "
+            "(0: the raw selection, as found on --repeats episodes).",
+        ),
     ) -> None:
         """Train agents on worlds with a desired property and compare them with default training (paper §6.2, Figure 8)."""
         influence_command(
@@ -221,4 +238,5 @@ def register(app: typer.Typer) -> None:
             runs_per_program,
             backend_name,
             ray_address,
+            confirm,
         )

@@ -36,13 +36,14 @@ def config_dict(config: Any) -> dict:
     return json.loads(json.dumps(dataclasses.asdict(config), default=str))
 
 
-def check_plan(run_dir: Path, stage: str, settings: dict) -> None:
+def check_plan(run_dir: Path, stage: str, settings: dict, record: bool = True) -> None:
     """Record the settings one stage's cached work is made with (``plan.json``), or refuse a run
     dir whose cached work of that stage was made with other settings.
 
     Two stages: "worlds" (the candidates: agent, G, env params, counts, seed; checked first) and
-    "training" (the selection, algorithm and budget; recorded only once a selection matched, so
-    a selection that matched nothing can be loosened and rerun in the same directory).
+    "training" (the selection, its confirmation, algorithm and budget; recorded only once a selection
+    matched, so a selection that matched nothing can be loosened and rerun in the same directory;
+    ``record`` False only checks it, before work such as a confirmation that another plan would waste).
     """
     path = run_dir / PLAN_FILE
     try:
@@ -57,7 +58,7 @@ def check_plan(run_dir: Path, stage: str, settings: dict) -> None:
             f"{run_dir} holds an influence run made with other settings ({', '.join(differing)}); "
             "rerun with the same ones or use another output directory (--out)."
         )
-    if stage not in plan:
+    if record and stage not in plan:
         write_text(path, json.dumps({**plan, stage: settings}, indent=1, sort_keys=True))
 
 

@@ -35,9 +35,10 @@ from worldagent.errors import WorldagentError
 from worldagent.events import Selection
 from worldagent.files import write_text
 from worldagent.influence.cache import PLAN_FILE, WORLDS_FILE, check_plan, config_dict, fingerprint, save_influenced_worlds
+from worldagent.influence.confirmation import check_confirm, confirm_selection, none_survived
 from worldagent.influence.statistics import episode_values, json_safe, rounded, summarise
 from worldagent.influence.training import LABELS, check_runs_per_program, train_all
-from worldagent.influence.worlds import resolved, search_direction, search_target, select_worlds
+from worldagent.influence.worlds import resolved, search_direction, search_target, selected_evaluations, stacked
 
 CANDIDATES = "influence-candidates"
 SEARCH = "influence-search"
@@ -112,15 +113,47 @@ def _check_algorithm(spec, algo: str | None) -> str:
     return algo
 
 
-def find_worlds(store, spec, env, params, policy, G, selection: Selection, counts: dict, progress: bool):
-    """Steps (a) and (b): candidate worlds, an optional search, and those with the property.
+def find_worlds(store, spec, env, params, policy, G, selection: Selection, counts: dict, progress: bool, backend: Any = None):
+    """Steps (a) and (b): candidate worlds, an optional search, and those with the property; with
+    ``counts["confirm"]`` > 0 only those that keep it on that many fresh episodes (``influence.confirmation``).
 
     Returns:
-        (evaluations tried, campaign names, worlds [k], latents f64[k, dim], {metric: f64[k]}, timings).
+        (evaluations tried, campaign names, worlds [k], latents f64[k, dim], {metric: f64[k] as found},
+        the confirmation's summary or None, timings).
     """
     tried, campaigns, timings = search_worlds(store, spec, env, params, policy, G, selection, counts, progress)
-    worlds, latents, values = select_worlds(store, campaigns, selection, spec)
-    return tried, campaigns, worlds, latents, values, timings
+    picks, confirmation = selected_evaluations(store, campaigns, selection, spec), None
+    if counts.get("confirm"):
+        clock = time.perf_counter()
+        setup = selecting_setup(spec, env, params, policy, G, counts, backend)
+        picks, confirmation = confirm_selection(
+            store,
+            setup,
+            picks,
+            selection,
+            repeats=counts["confirm"],
+            seed=counts["seed"],
+            name=f"influence:{selection.text}",
+            failure=failure_event(spec),
+            progress=progress,
+        )
+        timings["confirm"] = time.perf_counter() - clock
+        if not picks:
+            raise none_survived(confirmation, selection)
+    worlds, latents, values = stacked(picks, selection, spec)
+    return tried, campaigns, worlds, latents, values, confirmation, timings
+
+
+def selecting_setup(spec, env, params, policy, G, counts: dict, backend: Any = None):
+    """The ``experiments.Setup`` of the agent that selects the worlds (what a confirmation replays)."""
+    from worldagent.experiments import Setup
+
+    return Setup(spec, env, params, policy, G, counts["repeats"], counts.get("options", {}), backend)
+
+
+def failure_event(spec) -> Selection | None:
+    """The env's failure event (``spec.failure``), resolved; None where the env has none."""
+    return resolved(spec.failure, spec) if spec.failure else None
 
 
 def search_worlds(store, spec, env, params, policy, G, selection: Selection, counts: dict, progress: bool, names=(CANDIDATES, SEARCH)):
@@ -210,6 +243,7 @@ def influence(
     runs_per_program: int | None = None,
     rounds: int = 1,
     backend: Any = None,
+    confirm: int = 0,
 ) -> dict:
     """Influence agents: train on worlds with a property, compare with default training (paper §6.2).
 
@@ -247,7 +281,10 @@ def influence(
             the worlds it selects to that seed's influenced worlds and retrains on them, kept in
             ``run_dir/round-<r>/``.
         backend: where the agents train: None here, or a Ray backend (``evaluation.backends``),
-            each program of runs a task on a worker (``many.train_many``).
+            each program of runs a task on a worker (``many.train_many``); the confirmation plays there too.
+        confirm: fresh episodes each selected world is replayed on (``influence.confirmation``): only the
+            worlds that keep the property on them are trained on (every round's selection alike);
+            0 (the default here; the CLI's is 32): the raw selection, as found.
 
     Returns:
         The content of ``run_dir/influence.json`` (with NaN where the file has null); with
@@ -263,6 +300,7 @@ def influence(
     _check_counts(seeds, episodes, candidates, search_budget, eval_worlds, repeats)
     check_runs_per_program(runs_per_program)
     check_rounds(rounds)
+    confirm = check_confirm(confirm)
     if search not in SEARCHES:
         raise WorldagentError(f"unknown search {search!r}; use one of: {', '.join(SEARCHES)}.")
     if G.env != spec.name:
@@ -291,12 +329,21 @@ def influence(
             "params": fingerprint(params),
         },
     )
+    training_plan = {
+        "selection": selection.describe(),
+        **({"confirm": confirm} if confirm else {}),  # absent without confirmation: plans made before the option still match
+        "algo": algo,
+        "training": config_dict(config),
+        "greedy": bool(greedy),
+        "options": options,
+    }
+    check_plan(run_dir, "training", training_plan, record=False)  # refused before a confirmation it would not use
     with RunStore(run_dir) as store:
-        tried, campaigns, worlds, latents, values, timings = find_worlds(store, spec, env, params, policy, G, selection, counts, progress)
-        training = config_dict(config)
-        check_plan(
-            run_dir, "training", {"selection": selection.describe(), "algo": algo, "training": training, "greedy": bool(greedy), "options": options}
+        found = {**counts, "confirm": confirm, "options": options}
+        tried, campaigns, worlds, latents, values, confirmation, timings = find_worlds(
+            store, spec, env, params, policy, G, selection, found, progress, backend
         )
+        check_plan(run_dir, "training", training_plan)
         save_influenced_worlds(run_dir / WORLDS_FILE, spec, worlds, latents, values)
         agents, timings["train"] = train_all(
             run_dir, spec, algo, config, G, worlds, selection, seeds, options, params, progress, runs_per_program, backend
@@ -308,13 +355,16 @@ def influence(
     timings["total"] = time.perf_counter() - started
     settings = {**counts, "episodes": episodes, "seeds": seeds, "options": options, "greedy": bool(greedy), "training": config_dict(config)}
     worlds_found = {"tried": len(tried), "selected": int(len(latents)), "campaigns": campaigns, "selected_values": value_ranges(values)}
+    if confirmation is not None:  # "selected": the worlds trained on, those that survived; "selected_values" as found
+        settings["confirm"] = confirm
+        worlds_found |= {"raw_selected": confirmation["selected"], "confirmation": confirmation}
     result = round_result(spec, algo, selection, settings, worlds_found, per_seed, agents, "agents", timings)
     write_text(run_dir / RESULT_FILE, json.dumps(json_safe(result), indent=1))
     if rounds > 1:
         from worldagent.influence.rounds import later_rounds
 
         job = dict(
-            spec=spec, env=env, params=params, G=G, selection=selection, algo=algo, config=config, options=options, counts=counts, backend=backend
+            spec=spec, env=env, params=params, G=G, selection=selection, algo=algo, config=config, options=options, counts=found, backend=backend
         )
         result["rounds"] = later_rounds(run_dir, job, settings, seeds, per_seed["default"], rounds, greedy, runs_per_program, progress)
         write_text(run_dir / RESULT_FILE, json.dumps(json_safe(result), indent=1))

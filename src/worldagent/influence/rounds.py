@@ -31,17 +31,20 @@ import numpy as np
 
 from worldagent.files import write_text
 from worldagent.influence.cache import WORLDS_FILE, load_influenced_worlds, save_influenced_worlds
+from worldagent.influence.confirmation import confirm_selection
 from worldagent.influence.experiment import (
     RESULT_FILE,
     compare_agents,
+    failure_event,
     round_result,
     search_worlds,
+    selecting_setup,
     trained_policies,
     value_ranges,
 )
 from worldagent.influence.statistics import json_safe
 from worldagent.influence.training import train_agents
-from worldagent.influence.worlds import select_worlds
+from worldagent.influence.worlds import selected_evaluations, stacked
 
 
 def round_dir(run_dir: Path, r: int) -> Path:
@@ -120,7 +123,7 @@ def one_round(
     spec, selection, counts = job["spec"], job["selection"], job["counts"]
     started, here, before = time.perf_counter(), round_dir(run_dir, r), round_dir(run_dir, r - 1)
     previous = trained_policies({f"influenced-s{s}": before / "agents" / f"influenced-s{s}" / "policy" for s in seeds}, spec, greedy)
-    timings, tried, selected, added, campaigns = {"search": 0.0}, 0, {}, {}, []
+    timings, tried, selected, added, campaigns, confirmed = {"search": 0.0}, 0, {}, {}, [], {}
     for s in seeds:
         clock = time.perf_counter()
         names = round_campaigns(r, s)
@@ -128,7 +131,15 @@ def one_round(
         evaluated, used, _ = search_worlds(
             store, spec, job["env"], job["params"], previous[f"influenced-s{s}"], job["G"], selection, fresh, progress, names
         )
-        found = select_worlds(store, used, selection, spec) if selection.mask(evaluated).any() else None  # none: the agent no longer fails there
+        picks = selected_evaluations(store, used, selection, spec) if selection.mask(evaluated).any() else []  # none: the agent no longer fails there
+        if picks and counts.get("confirm"):
+            setup = selecting_setup(spec, job["env"], job["params"], previous[f"influenced-s{s}"], job["G"], counts, job.get("backend"))
+            name = f"influence-round{r}-s{s}:{selection.text}"
+            failure = failure_event(spec)
+            picks, confirmed[str(s)] = confirm_selection(
+                store, setup, picks, selection, repeats=counts["confirm"], seed=fresh["seed"], name=name, failure=failure, progress=progress
+            )
+        found = stacked(picks, selection, spec) if picks else None
         before_count = len(pools[s][1])
         pools[s] = merge_worlds(spec, pools[s], found)
         save_influenced_worlds(here / worlds_file(s), spec, *pools[s])
@@ -153,6 +164,7 @@ def one_round(
         "training_worlds": {str(s): len(pools[s][1]) for s in seeds},
         "campaigns": campaigns,
         "selected_values": {str(s): value_ranges(pools[s][2]) for s in seeds},
+        **({"confirmation": confirmed} if confirmed else {}),  # per seed: how many of its agent's raw selection survived
     }
     result = round_result(spec, job["algo"], selection, settings, worlds, {"default": default, "influenced": influenced}, agents, "agents", timings)
     result["round"] = r

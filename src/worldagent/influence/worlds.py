@@ -7,7 +7,6 @@ selected worlds are picked to draw (Figure 8, right).
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Sequence
 from typing import Any
 
@@ -16,6 +15,7 @@ import numpy as np
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.events import Selection, parse_selection
+from worldagent.store import world_digest
 
 
 def resolved(selection: Selection | str, env) -> Selection:
@@ -41,15 +41,19 @@ def select_worlds(store, campaign_names: Sequence[str], selection: Selection | s
             selected metric took on them (so the threshold can be moved), or when the
             campaigns hold no worlds.
     """
-    spec = registry.get(env)
-    selection = resolved(selection, spec)
+    return stacked(selected_evaluations(store, campaign_names, selection, env), selection, env)
+
+
+def selected_evaluations(store, campaign_names: Sequence[str], selection: Selection | str, env) -> list:
+    """The evaluations (worlds kept) of the campaigns that have the property, each distinct world once
+    (its first evaluation); refused as ``select_worlds`` says."""
+    selection = resolved(selection, env)
     evaluations = [e for name in campaign_names for e in store.evaluations(name, with_worlds=True)]
     if not evaluations:
         raise WorldagentError(f"campaigns {', '.join(campaign_names)} hold no evaluated worlds in {store.path}; evaluate some candidates first.")
-    means = selection.world_means(evaluations)
     keep = selection.mask(evaluations)
     if not keep.any():
-        ranges = "; ".join(f"{metric} ranged {_range(values)}" for metric, values in means.items())
+        ranges = "; ".join(f"{metric} ranged {_range(values)}" for metric, values in selection.world_means(evaluations).items())
         raise WorldagentError(
             f"none of the {len(evaluations)} worlds tried matches '{selection.describe()}' ({ranges}); "
             "loosen the selection or try more worlds (--candidates, --search-budget)."
@@ -57,9 +61,15 @@ def select_worlds(store, campaign_names: Sequence[str], selection: Selection | s
     kept = [i for i, k in enumerate(keep) if k]
     if any(evaluations[i].world is None for i in kept):
         raise WorldagentError(f"the store {store.path} lacks the worlds of some evaluations; rerun the candidates with worlds kept.")
-    kept = first_of_each_world(evaluations, kept)
-    latents = np.stack([evaluations[i].latent for i in kept])
-    return spec.stack_worlds([evaluations[i].world for i in kept]), latents, {m: v[kept] for m, v in means.items()}
+    return [evaluations[i] for i in first_of_each_world(evaluations, kept)]
+
+
+def stacked(evaluations: Sequence, selection: Selection | str, env) -> tuple[Any, np.ndarray, dict[str, np.ndarray]]:
+    """(worlds [k], latents f64[k, dim], {metric: f64[k]}) of evaluations with worlds: the selection's
+    metrics as found (averaged over the episodes each world was evaluated on)."""
+    spec = registry.get(env)
+    latents = np.stack([e.latent for e in evaluations])
+    return spec.stack_worlds([e.world for e in evaluations]), latents, resolved(selection, spec).world_means(evaluations)
 
 
 def first_of_each_world(evaluations: Sequence, indices: Sequence[int]) -> list[int]:
@@ -71,8 +81,7 @@ def first_of_each_world(evaluations: Sequence, indices: Sequence[int]) -> list[i
     """
     seen, unique = set(), []
     for i in indices:
-        world = evaluations[i].world
-        digest = hashlib.sha256(b"".join(np.ascontiguousarray(world[name]).tobytes() for name in sorted(world))).digest()
+        digest = world_digest(evaluations[i].world)
         if digest not in seen:
             seen.add(digest)
             unique.append(i)

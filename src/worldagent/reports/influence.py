@@ -58,6 +58,33 @@ def training_regime(result: dict) -> str:
     return f"{algo}, {episodes:,} episodes each" + (f"; beside {algo}'s defaults: {', '.join(changed)}" if changed else f"; {algo}'s defaults")
 
 
+def training_worlds(result: dict) -> str:
+    """The influenced training worlds in words: the property, and with a confirmed selection how many of
+    the raw selection kept it on fresh episodes ("crash_rate (crashed) > 0.5, 37 of 152 confirmed on 32 fresh episodes")."""
+    described = result.get("selection", {}).get("describe", "")
+    confirmation = result.get("worlds", {}).get("confirmation")
+    if not described or not confirmation:
+        return described
+    return f"{described}, {confirmation['survived']} of {confirmation['selected']} confirmed on {confirmation['repeats']} fresh episodes"
+
+
+def confirmation_sentence(result: dict) -> str:
+    """A sentence for a report: how many selected worlds survived confirmation and the property's per-episode
+    rate on them, found beside confirmed ('' without a confirmation)."""
+    confirmation = result.get("worlds", {}).get("confirmation")
+    if not confirmation:
+        return ""
+    rates = confirmation["property"]
+    found, raw, kept = rates["selected_found"], rates["selected_confirmed"], rates["kept_confirmed"]
+    return (
+        f"Of the {confirmation['selected']} distinct worlds selected for {rates['event']} on the candidates' episodes, "
+        f"{confirmation['survived']} kept it on {confirmation['repeats']} fresh episodes each and became the influenced training worlds. "
+        f"The property's per-episode rate on the selection: found {found['mean']:.3g} (the selection's own episodes), "
+        f"confirmed {raw['mean']:.3g} [{raw['low']:.3g}, {raw['high']:.3g}]; on the kept worlds {kept['mean']:.3g} "
+        f"[{kept['low']:.3g}, {kept['high']:.3g}] (95% intervals over worlds)."
+    )
+
+
 def _interval(entry: dict) -> float:
     """The CI half-width; NaN (no error bar drawn) when unknown (one seed: NaN in memory, null in JSON)."""
     value = entry.get("ci95")
@@ -111,7 +138,7 @@ def influence_figure(result: dict, example_worlds: Any, spec: str | EnvSpec, out
         axis.imshow(world_image(spec, world), interpolation="nearest")
         axis.set_axis_off()
     seeds = max((e.get("seeds", 0) for m in metrics for e in summary[m].values()), default=0)
-    selection = result.get("selection", {}).get("describe", "")
+    selection = training_worlds(result)
     figure.suptitle(
         f"{spec.name}: default vs influenced training "
         + (f"(mean over {seeds} seeds, 95% CI)" if seeds > 1 else "(one seed: no CI)")

@@ -3,6 +3,7 @@ found, located and gated; identical agents differ by exactly 0; bad input is ref
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import textwrap
 
@@ -18,7 +19,8 @@ from worldagent.envs import registry
 from worldagent.envs.racing.driver import DriverParams, driver_action
 from worldagent.envs.racing.env import ACTION_DIRECTIONS
 from worldagent.errors import WorldagentError
-from worldagent.store import RunStore
+from worldagent.evaluation.backends import LocalBackend
+from worldagent.store import Evaluation, RunStore
 
 runner = CliRunner()
 SPEC = registry.get("racing")
@@ -82,10 +84,11 @@ def sharpest_left_corner(centreline: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def planted(racing_generator, tmp_path_factory):
-    """The scripted driver (A) against its blind copy (B): 128 prior worlds and a 420-world CMA-ES search."""
+    """The scripted driver (A) against its blind copy (B): 128 prior worlds and a 420-world CMA-ES search, the regressed
+    and reported worlds confirmed on 8 fresh episodes per agent (the fewest where 8 of 8 crashes is beyond 0.5)."""
     setup = differential.diff_setup("racing", "scripted/driver", blind_driver(SPEC.make_env({})[1]), racing_generator, repeats=1)
     with RunStore(tmp_path_factory.mktemp("planted")) as store:
-        result = differential.diff(store, setup, worlds=128, search="cmaes", budget=420, seed=0, progress=False)
+        result = differential.diff(store, setup, worlds=128, search="cmaes", budget=420, seed=0, progress=False, confirm=8)
         worlds = {(e.slot, e.generation): e.world for e in store.evaluations(with_worlds=True) if e.campaign == result["worlds"]["campaign"]}
     return result, worlds
 
@@ -125,7 +128,91 @@ def test_differential_search_finds_where_the_blind_copy_crashes_and_the_driver_l
     row = search["regressed_worlds"][0]
     assert row["a"]["crashed"] == 0.0 and row["b"]["crashed"] == 1.0
     # CMA-ES on return(B) − return(A) concentrates on the blind spot: more regressed worlds than prior sampling
-    assert search["regressed"] / search["evaluations"] > 1.5 * result["worlds"]["failure"]["regressed"] / result["worlds"]["worlds"]
+    assert search["regressed_evaluations"] / search["evaluations"] > 1.5 * result["worlds"]["failure"]["regressed"] / result["worlds"]["worlds"]
+    assert search["regressed"] <= search["regressed_evaluations"] and len(search["regressed_worlds"]) == min(20, search["regressed"])
+
+
+def test_regressed_worlds_are_confirmed_for_both_agents_on_the_same_fresh_episodes(planted):
+    result, _ = planted
+    for part in (result["worlds"], result["search"]):
+        confirmed = part["confirmed"]
+        assert confirmed["repeats"] == 8 and confirmed["checked"] == min(50, confirmed["found_regressed"]) >= 1
+        assert confirmed["episodes"] == 2 * 8 * confirmed["checked"] and len({row["world"] for row in confirmed["worlds"]}) == confirmed["checked"]
+        for row in confirmed["worlds"]:
+            assert row["found_regressed"] and row["a"]["found"]["crashed"]["episodes"] == 1 and row["b"]["confirmed"]["crashed"]["episodes"] == 8
+            assert row["confirmed_regressed"] == (row["b"]["confirmed_failing"] and row["a"]["confirmed_passing"])
+        # the blind spot is in the world: most of its regressed worlds stay regressed on fresh episodes
+        assert confirmed["regressed"] >= confirmed["checked"] // 2
+    assert result["worlds"]["confirmed"]["found_regressed"] == result["worlds"]["failure"]["regressed_distinct"]
+    search = result["search"]
+    assert search["confirmed"]["found_regressed"] == search["regressed"]
+    assert search["confirmed"]["largest_drop"]["mean"] > 300 and search["confirmed"]["largest_drop"]["episodes"] == 8
+    assert result["confirmation_episodes"] >= result["worlds"]["confirmed"]["episodes"] + search["confirmed"]["episodes"]
+    from worldagent.analysis.gate import parse_gate, quantities
+
+    gate = parse_gate(["search_regressed > 0"], SPEC.metrics)
+    assert quantities(result)["search_regressed"] == search["confirmed"]["regressed"] and gate.check(quantities(result))["failed"]
+    from worldagent.reports.diff import markdown
+
+    assert "are confirmed regressed (B's confirmed interval fails" in markdown(result)
+
+
+def paired(slot: int, a_crashed: float, b_crashed: float) -> Evaluation:
+    """A paired evaluation of one episode: A's and B's crash (and return: minus it)."""
+    episodes = [{"crashed": b_crashed, "return": -b_crashed, "A.crashed": a_crashed, "A.return": -a_crashed}]
+    return Evaluation("diff-cmaes-min-return-s0", 0, slot, np.array([0.1 * slot, 0.0]), a_crashed - b_crashed, episodes, 0.0, 0.0)
+
+
+def test_a_search_counts_distinct_regressed_worlds_not_evaluations():
+    from worldagent.analysis.paired import search_summary
+    from worldagent.events import parse_selection
+
+    event = parse_selection("crash_rate > 0.5", "racing")
+    track, other = {"road": np.ones(3)}, {"road": np.zeros(3)}
+    found = [paired(0, 0.0, 1.0), paired(1, 0.0, 1.0), paired(2, 0.0, 0.0), paired(3, 0.0, 1.0), paired(4, 1.0, 1.0)]
+    worlds = [track, track, other, {"road": np.arange(3.0)}, other]  # slots 0 and 1: one track after repair
+    found = [dataclasses.replace(e, world=w) for e, w in zip(found, worlds)]
+    summary = search_summary(found, SPEC, event, "return", False)
+    assert summary["regressed_evaluations"] == 3 and summary["regressed"] == 2
+    assert sorted(row["slot"] for row in summary["regressed_worlds"]) == [0, 3]  # one row per distinct world, its first evaluation
+
+
+class DiesAfter(LocalBackend):
+    """A backend whose process is 'killed' after ``batches`` batches."""
+
+    def __init__(self, batches: int):
+        self.left = batches
+
+    def run(self, evaluate, batches):
+        for item in super().run(evaluate, batches):
+            if self.left == 0:
+                raise KeyboardInterrupt
+            self.left -= 1
+            yield item
+
+
+def test_a_killed_confirmation_of_both_agents_resumes_to_identical_rows(racing_generator, tmp_path, monkeypatch):
+    from worldagent.analysis import confirm as module
+    from worldagent.events import parse_selection
+
+    monkeypatch.setattr(module, "BATCH", 2)  # several batches of a few worlds
+    setup = differential.diff_setup("racing", "scripted/driver", blind_driver(SPEC.make_env({})[1]), racing_generator, repeats=1)
+    event, rows = parse_selection("crash_rate > 0.5", "racing"), {}
+    for name, backend in (("straight", None), ("killed", DiesAfter(1))):
+        with RunStore(tmp_path / name) as store:
+            picks = differential.prior_set(store, setup, 6, progress=False)
+            common = dict(name="test", repeats=3, seed=0, progress=False)
+            if backend is not None:
+                with pytest.raises(KeyboardInterrupt):
+                    differential.confirm_worlds(store, dataclasses.replace(setup, backend=backend), picks, event, ["return"], **common)
+                assert len(store.confirmations()) == 2  # A's first batch, committed
+            confirmed = differential.confirm_worlds(store, setup, picks, event, ["return"], **common)
+            rows[name] = sorted((c.agent, c.world, c.seed, c.repeats, str(c.episodes)) for c in store.confirmations())
+            assert len({agent for agent, *_ in rows[name]}) == 2  # A and B, each confirmed
+            # A and B play the same keys (common random numbers): the same world, seed and repeats for both
+            assert all(row["confirmation_seed"] and row["a"]["found"]["return"]["episodes"] == 1 for row in confirmed)
+            assert len({row[1:4] for row in rows[name]}) == len(rows[name]) // 2
+    assert rows["killed"] == rows["straight"] and len(rows["straight"]) == 2 * len({row[1] for row in rows["straight"]})
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +233,7 @@ def run(folder, monkeypatch, *args):
 
 def test_the_gate_fails_a_planted_regression_and_passes_identical_agents(cli_inputs, monkeypatch, tmp_path):
     folder, generator = cli_inputs
-    common = ["--generator", str(generator), "--worlds", "48", "--repeats", "1", "--quiet"]
+    common = ["--generator", str(generator), "--worlds", "48", "--repeats", "1", "--quiet", "--confirm", "6"]
     gates = ["--fail-if", "p_failure_increase > 0.005", "--fail-if", "regressed > 0", "--fail-if", "return_drop > 2"]
     worse = run(folder, monkeypatch, "--agent", "diff_drivers:driver", "--agent", "diff_drivers:blind", *common, *gates, "--out", str(tmp_path / "w"))
     assert worse.exit_code == 1, worse.output
@@ -172,7 +259,7 @@ def test_the_gate_fails_a_planted_regression_and_passes_identical_agents(cli_inp
 
 def test_worlds_from_a_stored_campaign_a_dataset_and_an_atlas_search(cli_inputs, monkeypatch, tmp_path, racing_data):
     folder, generator = cli_inputs
-    agents = ["--agent", "scripted/driver", "--agent", "diff_drivers:blind", "--repeats", "1", "--quiet"]
+    agents = ["--agent", "scripted/driver", "--agent", "diff_drivers:blind", "--repeats", "1", "--quiet", "--confirm", "6"]
     searched = run(
         folder,
         monkeypatch,
@@ -200,7 +287,8 @@ def test_worlds_from_a_stored_campaign_a_dataset_and_an_atlas_search(cli_inputs,
     from_campaign = json.loads((tmp_path / "c" / "diff.json").read_text())
     assert from_campaign["worlds"]["worlds"] == 42 and from_campaign["source"]["campaign"] == "diff-atlas-min-return-s0"
     # the same worlds and keys: the set comparison agrees with what the search measured
-    assert from_campaign["worlds"]["failure"]["regressed"] == atlas["regressed"]
+    assert from_campaign["worlds"]["failure"]["regressed"] == atlas["regressed_evaluations"]
+    assert from_campaign["worlds"]["failure"]["regressed_distinct"] == atlas["regressed"] == atlas["confirmed"]["found_regressed"]
 
     small = racing_data.subset(np.arange(12)).save(tmp_path / "twelve.npz")
     listed = run(folder, monkeypatch, *agents, "--dataset", str(small), "--dataset", str(small), "--out", str(tmp_path / "d"))

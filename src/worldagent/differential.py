@@ -13,6 +13,11 @@ campaign), so a difference between them is a difference of the agents, not of th
   ``dataset_worlds``).
 - ``differential_search``: CMA-ES or the atlas (CMA-ME over the env's descriptors) on
   metric(B) − metric(A) over z, a campaign like any other.
+- ``confirm_worlds``: the worlds a diff reports (the regressed worlds of a world set, a search's
+  regressed and most extreme worlds) replayed for A and for B on fresh episodes (``analysis.confirm``).
+  The confirmation keys depend on the world and the seed only, so the two agents' confirmations
+  play the same episodes: common random numbers again, by design (the one place two confirmations
+  share keys). ``side_setup`` gives ``confirm`` one agent of a ``DiffSetup``.
 - ``diff``: all of it, summarised by ``analysis.paired`` (the statistics of ``analysis.diff``).
 """
 
@@ -28,7 +33,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from worldagent.agents.policy import agent_record
-from worldagent.analysis.paired import BASELINE, search_summary, summarise
+from worldagent.analysis.confirm import REPEATS
+from worldagent.analysis.paired import (
+    BASELINE,
+    confirmed_pairs,
+    distinct_firsts,
+    failure_masks,
+    features_of,
+    pair_row,
+    regressed_order,
+    search_summary,
+    side_of,
+    summarise,
+    world_digests,
+)
 from worldagent.envs import registry
 from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
@@ -42,6 +60,7 @@ from worldagent.store import Evaluation, RunStore, agent_identity
 
 SET_BATCH = 64  # worlds of a world set evaluated (and committed) at a time
 SEARCHES = ("cmaes", "atlas")
+CONFIRMED_AT_MOST = 50  # distinct regressed worlds confirmed per world set or search (likeliest under the prior first)
 
 
 @dataclass(frozen=True)
@@ -74,6 +93,26 @@ class DiffSetup:
     def records(self) -> dict:
         """{"a", "b"}: what each agent is (``policy.agent_record``), as campaigns record it."""
         return {"a": agent_record(self.a.policy), "b": agent_record(self.b.policy)}
+
+
+@dataclass(frozen=True)
+class SideSetup:
+    """One agent of a ``DiffSetup`` in the shape ``analysis.confirm.confirm`` takes (``experiments.Setup``'s fields)."""
+
+    spec: EnvSpec
+    env: Any
+    params: Any
+    policy: Any
+    generator: Any
+    repeats: int
+    options: dict
+    backend: Any = None
+
+
+def side_setup(setup: DiffSetup, which: str) -> SideSetup:
+    """Agent ``which`` ("a" or "b") of ``setup`` with the env it plays, its generator and backend."""
+    one = {"a": setup.a, "b": setup.b}[which]
+    return SideSetup(setup.spec, one.env, one.params, one.policy, setup.generator, setup.repeats, one.options, setup.backend)
 
 
 def side(spec: EnvSpec, agent: Any, options: dict | None, greedy: bool, stochastic: bool) -> Side:
@@ -362,6 +401,84 @@ def differential_search(
     return found, name
 
 
+# -- confirmation ---------------------------------------------------------------------------------
+
+
+def confirm_worlds(
+    store: RunStore,
+    setup: DiffSetup,
+    picks: list[Evaluation],
+    selection: Any,
+    metrics: list[str],
+    *,
+    name: str,
+    repeats: int,
+    seed: int,
+    progress: bool = True,
+) -> list[dict]:
+    """Each picked paired evaluation confirmed for A and for B on the same ``repeats`` fresh episodes (A then B; stored,
+    resumable, named ``name``), as ``analysis.paired.pair_row`` s."""
+    from worldagent.analysis.confirm import confirm
+
+    if repeats == 0 or not picks:
+        return []
+    a = confirm(store, side_setup(setup, "a"), [side_of(e, "a") for e in picks], name=f"{name}:A", repeats=repeats, seed=seed, progress=progress)
+    b = confirm(store, side_setup(setup, "b"), [side_of(e, "b") for e in picks], name=f"{name}:B", repeats=repeats, seed=seed, progress=progress)
+    return [pair_row(one, other, selection, metrics) for one, other in zip(a, b)]
+
+
+def regressed_picks(store: RunStore, evaluations: list[Evaluation], spec: EnvSpec, selection: Any) -> tuple[list[Evaluation], int]:
+    """(the first ``CONFIRMED_AT_MOST`` distinct regressed worlds, likeliest under the prior first; how many distinct there are)."""
+    fail_a, fail_b, _, _ = failure_masks(evaluations, spec, selection)
+    features, latents = features_of(evaluations, spec, store)
+    order = regressed_order(evaluations, fail_a, fail_b, features, latents)
+    firsts = distinct_firsts(order, world_digests([evaluations[i] for i in order], store))
+    return [evaluations[i] for i in firsts[:CONFIRMED_AT_MOST]], len(firsts)
+
+
+def confirmed_regressed(
+    store: RunStore,
+    setup: DiffSetup,
+    evaluations: list[Evaluation],
+    selection: Any,
+    metrics: list[str],
+    *,
+    name: str,
+    repeats: int,
+    seed: int,
+    progress: bool = True,
+) -> dict | None:
+    """The regressed worlds among ``evaluations`` (distinct, at most ``CONFIRMED_AT_MOST``) confirmed for both agents:
+    ``analysis.paired.confirmed_pairs``; None when ``repeats`` is 0."""
+    if repeats == 0:
+        return None
+    picks, found = regressed_picks(store, evaluations, setup.spec, selection)
+    rows = confirm_worlds(store, setup, picks, selection, metrics, name=name, repeats=repeats, seed=seed, progress=progress)
+    return confirmed_pairs(rows, found, repeats, selection)
+
+
+def confirmed_search(
+    store: RunStore, setup: DiffSetup, evaluations: list[Evaluation], search: dict, selection: Any, *, repeats: int, seed: int, progress: bool = True
+) -> dict | None:
+    """A differential search's reported worlds confirmed for both agents: its regressed worlds (``confirmed_regressed``:
+    "regressed" is the confirmed count ``search_regressed`` gates read) and its most extreme world, whose confirmed
+    drop (A − B of the searched metric over the shared fresh episodes; B − A when maximising) ``search_drop`` reads."""
+    if repeats == 0:
+        return None
+    metric, name = search["metric"], f"diff:{search['campaign']}"
+    metrics = list(dict.fromkeys((metric, *selection.metrics)))
+    found = confirmed_regressed(store, setup, evaluations, selection, metrics, name=name, repeats=repeats, seed=seed, progress=progress)
+    best = next(e for e in evaluations if (e.generation, e.slot) == (search["best"]["generation"], search["best"]["slot"]))
+    row = confirm_worlds(store, setup, [best], selection, metrics, name=f"{name}:best", repeats=repeats, seed=seed, progress=progress)[0]
+    change = row["difference"][metric]  # B − A
+    sign = 1.0 if search["maximize"] else -1.0
+    low, high = sorted((sign * change["low"], sign * change["high"]))
+    found["best"] = row
+    found["largest_drop"] = {"mean": sign * change["mean"], "low": low, "high": high, "episodes": change["episodes"]}
+    found["episodes"] += 0 if row["world"] in {r["world"] for r in found["worlds"]} else 2 * repeats
+    return found
+
+
 # -- the whole comparison -------------------------------------------------------------------------
 
 
@@ -381,6 +498,7 @@ def diff(
     gate: Any = None,
     seed: int = 0,
     progress: bool = True,
+    confirm: int = REPEATS,
 ) -> dict:
     """Compare A and B on a world set and/or search for where B is worse; everything ``worldagent diff`` reports.
 
@@ -393,11 +511,15 @@ def diff(
         failure: which worlds fail (the event language; default the env's ``failure``).
         metric: the α-CVaR's metric (higher is better; default the main one).
         gate: an ``analysis.gate.Gate`` checked on the result (None: none).
-        seed: seed of the worlds, the episodes, the search and the bootstrap.
+        seed: seed of the worlds, the episodes, the search, the bootstrap and the confirmation keys.
+        confirm: fresh episodes per reported world and agent (0 skips): the regressed worlds and the search's
+            reported worlds replayed for A and B on the same keys (``confirmed_regressed``, ``confirmed_search``).
 
     Returns:
-        {"env", "agents" {"a", "b"}, "seed", "repeats", "source", "worlds": ``summarise`` or None,
-        "search": ``search_summary`` with "campaign" or None, "episodes": all spent, "gate": its check or None}.
+        {"env", "agents" {"a", "b"}, "seed", "repeats", "source", "worlds": ``summarise`` with "confirmed" or None,
+        "search": ``search_summary`` with "campaign" and "confirmed" or None, "episodes": all the comparison spent,
+        "confirmation_episodes": those of the confirmations, "gate": its check or None}. The gate reads the paired
+        statistics of the world set as they are (unbiased: every sampled world counts) and the search's confirmed figures.
     """
     from worldagent.analysis.gate import quantities
     from worldagent.events import parse_selection
@@ -415,6 +537,11 @@ def diff(
         else:
             found, result["source"] = prior_set(store, setup, int(worlds), seed=seed, progress=progress), {"prior": int(worlds)}
         result["worlds"] = {"campaign": found[0].campaign, **summarise(found, spec, selection, metric, store=store, seed=seed)}
+        shown = list(dict.fromkeys((metric, *selection.metrics)))
+        name = f"diff:{found[0].campaign}"
+        result["worlds"]["confirmed"] = confirmed_regressed(
+            store, setup, found, selection, shown, name=name, repeats=confirm, seed=seed, progress=progress
+        )
     if search is not None:
         searched, name = differential_search(
             store,
@@ -431,8 +558,12 @@ def diff(
         result["search"] = {
             "campaign": name,
             "search": search,
-            **search_summary(searched, spec, selection, spec.metrics.resolve(objective), maximize),
+            **search_summary(searched, spec, selection, spec.metrics.resolve(objective), maximize, store=store),
         }
+        result["search"]["confirmed"] = confirmed_search(
+            store, setup, searched, result["search"], selection, repeats=confirm, seed=seed, progress=progress
+        )
     result["episodes"] = sum(part["episodes"] for part in (result["worlds"], result["search"]) if part)
+    result["confirmation_episodes"] = sum((part.get("confirmed") or {}).get("episodes", 0) for part in (result["worlds"], result["search"]) if part)
     result["gate"] = gate.check(quantities(result)) if gate is not None else None
     return result

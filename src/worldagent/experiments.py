@@ -427,6 +427,7 @@ def atlas(
     name: str | None = None,
     resume: bool = True,
     progress: bool = True,
+    confirm: int | None = None,
 ) -> dict:
     """A failure atlas: the worst (or best) world of every cell of a descriptor grid, by CMA-ME.
 
@@ -441,11 +442,14 @@ def atlas(
         failure: a selection (``"crash_rate > 0.5"``) saying which worlds fail, for the count of
             distinct failing worlds (None: none counted).
         name: the campaign (default ``atlas_campaign_name``); ``resume`` continues it.
+        confirm: fresh episodes per elite (default ``analysis.confirm.ELITE_REPEATS``; 0 skips): every
+            elite replayed on confirmation keys, giving the corrected archive (``search.atlas.confirm_elites``).
 
     Returns:
-        ``atlas_summary`` of the campaign.
+        ``atlas_summary`` of the campaign, with "confirmed": ``search.atlas.corrected_summary`` (None when skipped).
     """
-    from worldagent.search.atlas import atlas_optimiser
+    from worldagent.analysis.confirm import ELITE_REPEATS
+    from worldagent.search.atlas import atlas_optimiser, confirm_elites
 
     metric = setup.metric(metric)
     optimiser, extra = atlas_optimiser(setup.spec, setup.generator, maximize, seed, budget, descriptors, cells)
@@ -455,7 +459,10 @@ def atlas(
     spec = CampaignSpec(name, setup.spec.name, metric, maximize, "cma-me", int(budget), int(seed), dim, agent=agent_record(setup.policy), extra=extra)
     objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
     run_campaign(store, spec, objective, resume=resume, progress=progress, backend=setup.backend, optimiser=optimiser)
-    return atlas_summary(store, optimiser.grid, optimiser.describe, [name], maximize, selection)[name]
+    found = atlas_summary(store, optimiser.grid, optimiser.describe, [name], maximize, selection)[name]
+    repeats = ELITE_REPEATS if confirm is None else int(confirm)
+    found["confirmed"] = confirm_elites(store, setup, found, metric, maximize, selection, repeats=repeats, seed=seed, progress=progress)
+    return found
 
 
 def atlas_summary(store: RunStore, grid: Any, describe: Any, campaigns: Sequence[str], maximize: bool, failure: Any = None) -> dict:

@@ -3,6 +3,7 @@ Gaussian toy, resuming through the run store, one-line errors, and the CLI end t
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -288,9 +289,16 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
     runner = CliRunner()
     gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
     common = ["racing", "--agent", "driver", "--generator", str(gen), "--out", str(tmp_path / "run"), "--repeats", "1", "--quiet"]
-    args = [*common, "--event", "return < 60", "--worlds", "30", "--pool", "2000", "--pilot", "20"]
+    args = [*common, "--event", "return < 60", "--worlds", "30", "--pool", "2000", "--pilot", "20", "--confirm", "3", "--hits", "2"]
     result = runner.invoke(app, ["failure-rate", *args])
     assert result.exit_code == 0, result.output
+    written = json.loads((tmp_path / "run" / "failure-rate.json").read_text())
+    for method in ("mc", "is"):
+        hits = written[method]["hits"]  # the hits are confirmed; P is the estimate's own (every world drawn counts)
+        assert hits["hits"] == written[method]["estimate"]["hits"] or method == "is"
+        assert hits["checked"] == min(2, hits["distinct_hits"]) == len(hits["worlds"]) and hits["distinct_hits"] <= hits["hits"]
+        assert hits["confirmed_failing"] <= hits["checked"] and all(row["confirmed"]["return"]["episodes"] == 3 for row in hits["worlds"])
+    assert "confirmed on 3 fresh episodes each:" in result.output and "still fail (return < 60" in result.output
     estimates = [line for line in result.output.splitlines() if ": P = " in line]
     assert estimates[0].startswith("Monte Carlo: P = ") and estimates[1].startswith("importance sampling fell back to Monte Carlo: P = ")
     assert "s wall time" in result.output and "fell back: importance sampling is predicted to gain" in result.output  # 20 worlds of pilot
@@ -298,9 +306,14 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
         names = [c.name for c in store.campaigns()]
         assert names == ["failure-mc-return<60-s0", "failure-is-return<60-s0"]
         assert len(store.evaluations(names[0])) == 30 and len(store.evaluations(names[1])) == 20 + 30
+    with RunStore(tmp_path / "run", create=False) as store:
+        confirmed = sorted((c.world, str(c.episodes)) for c in store.confirmations())
     again = runner.invoke(app, ["failure-rate", *args]).output
     assert [line for line in again.splitlines() if ": P = " in line] == estimates  # resumed: the same estimates (the same fallback)
+    rewritten = json.loads((tmp_path / "run" / "failure-rate.json").read_text())
+    assert [rewritten[m]["hits"] for m in ("mc", "is")] == [written[m]["hits"] for m in ("mc", "is")]  # the confirmations read back
     with RunStore(tmp_path / "run", create=False) as store:  # read back with no agent or generator: the same estimates
+        assert sorted((c.world, str(c.episodes)) for c in store.confirmations()) == confirmed
         assert failure_names(store) == names
         assert [estimate_line(read_estimate(store, name)) for name in names] == estimates
         with pytest.raises(WorldagentError, match="not a failure-rate campaign"):
@@ -315,6 +328,7 @@ def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, raci
         (["--event", "return < 60", "--pool", "1000000000000"], "above the cap"),
         (["--event", "return < 60", "--repeats", "100000000"], "above the cap"),
         (["--event", "return < 60", "--out", str(gen / "generator.json")], "is a file"),
+        (["--event", "return < 60", "--confirm", "-1"], "--confirm -1; pass fresh episodes per listed hit"),
     ]:
         bad = runner.invoke(app, ["failure-rate", *common, *extra])
         lines = bad.output.strip().splitlines()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -12,8 +13,19 @@ from worldagent import experiments
 from worldagent.cli import app
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
-from worldagent.search.atlas import Grid, archive_of, atlas_names, cell_of, check_descriptors, distinct_count, grid_ranges, read_atlas
-from worldagent.store import RunStore
+from worldagent.search.atlas import (
+    Grid,
+    archive_of,
+    atlas_names,
+    cell_of,
+    check_descriptors,
+    corrected_summary,
+    distinct_count,
+    grid_ranges,
+    read_atlas,
+    stored_elites,
+)
+from worldagent.store import Evaluation, RunStore
 
 GRID = Grid(("a", "b"), (2, 3), ((0.0, 1.0), (0.0, 3.0)))
 
@@ -94,12 +106,13 @@ def test_bad_atlas_input_gets_one_line_errors():
 
 def test_a_killed_atlas_resumes_to_the_same_archive(tmp_path, racing_generator):
     setup = experiments.setup("racing", "driver", racing_generator, repeats=1)
-    common = dict(maximize=False, seed=1, cells=4, progress=False, failure="return < 50")
+    common = dict(maximize=False, seed=1, cells=4, progress=False, failure="return < 50", confirm=2)
     with RunStore(tmp_path / "whole") as store:
         whole = experiments.atlas(store, setup, "reward", budget=63, **common)
     with RunStore(tmp_path / "killed") as store:
-        experiments.atlas(store, setup, "reward", budget=21, **common)  # stopped after one generation
+        experiments.atlas(store, setup, "reward", budget=21, **{**common, "confirm": 0})  # stopped after one generation
         resumed = experiments.atlas(store, setup, "reward", budget=63, **common)
+    assert resumed["confirmed"] == whole["confirmed"] and whole["confirmed"]["elites"] == len(whole["archive"].cells)
     assert len(resumed["evaluations"]) == len(whole["evaluations"]) == 63
     assert [e.latent.tolist() for e in resumed["evaluations"]] == [e.latent.tolist() for e in whole["evaluations"]]
     np.testing.assert_array_equal(resumed["archive"].cells, whole["archive"].cells)
@@ -124,9 +137,13 @@ def test_the_atlas_command_draws_the_archive(tmp_path, racing_vae, racing_data, 
 
     gen = save_generator(tmp_path / "gen", racing_vae, racing_data.save(tmp_path / "data.npz"), racing_generator)
     args = ["atlas", "racing", "--agent", "driver", "--generator", str(gen), "--budget", "42", "--cells", "3", "--repeats", "1"]
-    result = CliRunner().invoke(app, [*args, "--failure", "crash_rate > 0.5", "--out", str(tmp_path / "run"), "--quiet"])
+    result = CliRunner().invoke(app, [*args, "--failure", "crash_rate > 0.5", "--out", str(tmp_path / "run"), "--quiet", "--confirm", "2"])
     assert result.exit_code == 0, result.output
     assert "atlas-min-return-s0: 42 worlds on a 3x3 grid of total_curvature, sharpest_corner" in result.output
+    assert "corrected archive (" in result.output and "failing cells (crash_rate (crashed) > 0.5): found " in result.output
+    written = json.loads((tmp_path / "run" / "atlas-min-return-s0.json").read_text())
+    assert written["confirmed"]["repeats"] == 2 and len(written["confirmed"]["cells"]) == written["confirmed"]["elites"] >= 1
+    assert written["found"]["coverage"] == written["confirmed"]["found"]["coverage"]
     assert Image.open(tmp_path / "run" / "atlas-min-return-s0.png").size[0] > 800
     bad = CliRunner().invoke(app, [*args, "--descriptors", "wall_share", "--out", str(tmp_path / "bad")])
     assert bad.exit_code == 2 and "unknown descriptor 'wall_share' for racing" in bad.output
@@ -138,7 +155,7 @@ def test_failures_are_explained_by_nearest_passing_worlds_and_groups(tmp_path, r
 
     setup = experiments.setup("racing", "driver", racing_generator, repeats=2)
     with RunStore(tmp_path) as store:
-        found = experiments.atlas(store, setup, "reward", budget=42, seed=0, cells=3, progress=False)
+        found = experiments.atlas(store, setup, "reward", budget=42, seed=0, cells=3, progress=False, confirm=0)
     median = float(np.median([e.score for e in found["evaluations"]]))
     failure = experiments.failure_selection(f"return < {median}", "racing")
     explained = experiments.explain_failures(setup, found, failure, count=2)
@@ -164,3 +181,71 @@ def test_a_descriptor_constant_on_decoded_worlds_is_refused_with_where_to_look()
     assert grid_ranges(lambda z: describe(z)[:, :1], 3, ["x"])[0][0] < 0
     with pytest.raises(WorldagentError, match=r"'wall_count' is 0 on all 512 worlds G\(z\) decoded.*worldagent check ENV --generator DIR"):
         grid_ranges(describe, 3, ["x", "wall_count"])
+
+
+def elite(slot: int, crashed: int, episodes: int, value: float) -> Evaluation:
+    """An evaluation of ``episodes`` episodes, ``crashed`` of them crashed, each of return ``value``."""
+    rows = [{"return": value, "crashed": float(i < crashed)} for i in range(episodes)]
+    return Evaluation("atlas-min-return-s0", 0, slot, np.zeros(2), value, rows, 0.0, 0.0)
+
+
+def test_the_corrected_archive_rescores_every_elite_and_counts_failing_cells_found_and_confirmed():
+    from worldagent.analysis.confirm import ConfirmedWorld
+
+    event = experiments.failure_selection("crash_rate > 0.5", "racing")
+    measures = np.array([[0.1, 0.5], [0.9, 2.5], [0.6, 1.5], [0.1, 1.5]])
+    found = [elite(0, 8, 8, -100.0), elite(1, 6, 8, -50.0), elite(2, 2, 8, 10.0), elite(3, 8, 8, -80.0)]
+    archive = archive_of(GRID, np.array([e.score for e in found]), measures, maximize=False)
+    np.testing.assert_array_equal(archive.cells, [0, 1, 4, 5])  # slots 0, 3, 2, 1
+    fresh = {  # slot: (crashed of 32, return, digest); slots 0 and 3 are one world after repair
+        0: (30, -90.0, "a" * 64),
+        3: (29, -85.0, "a" * 64),
+        1: (17, -40.0, "b" * 64),  # 17/32 = 0.53, interval [0.35, 0.71]: past 0.5 on average, not beyond doubt
+        2: (0, 20.0, "c" * 64),
+    }
+    confirmed = [ConfirmedWorld(found[int(i)], fresh[int(i)][2], elite(9, fresh[int(i)][0], 32, fresh[int(i)][1]).episodes, 7) for i in archive.best]
+    summary = corrected_summary(GRID, archive, confirmed, "return", 20.0, False, event)
+    assert summary["elites"] == 4 and summary["distinct_worlds"] == 3 and summary["episodes"] == 3 * 32
+    assert summary["found"]["qd_score"] == pytest.approx(120 + 100 + 10 + 70)
+    assert summary["confirmed"]["qd_score"] == pytest.approx(110 + 105 + 0 + 60)
+    assert summary["found"]["coverage"] == summary["confirmed"]["coverage"] == pytest.approx(4 / 6)  # no elite changes cell
+    assert summary["found"]["failing_cells"] == 3 and summary["found"]["failing_worlds"] == 2  # cells 0, 1 (one world) and 5
+    assert summary["confirmed"]["failing_cells"] == 2 and summary["confirmed"]["failing_worlds"] == 1
+    assert summary["no_longer_failing"] == [5]
+    cell = {row["cell"]: row for row in summary["cells"]}[5]
+    assert cell["confirmed_failure_rate"]["mean"] > 0.5 and cell["confirmed_failure_rate"]["low"] < 0.5 and not cell["confirmed_failing"]
+    assert cell["found"]["return"]["mean"] == -50.0 and cell["confirmed"]["return"]["mean"] == -40.0
+    unscored = [*confirmed[:3], ConfirmedWorld(confirmed[3].selected, "d" * 64, [], 7)]  # no finite fresh value: the cell drops out
+    assert corrected_summary(GRID, archive, unscored, "return", 20.0, False)["confirmed"]["coverage"] == pytest.approx(3 / 6)
+    with pytest.raises(WorldagentError, match="confirm every elite"):
+        corrected_summary(GRID, archive, confirmed[:2], "return", 20.0, False)
+
+
+def test_atlas_elites_are_confirmed_on_keys_no_search_drew_and_read_back_without_an_agent(tmp_path, racing_generator):
+    import jax
+
+    from worldagent.analysis.confirm import agent_key, confirmation_keys
+    from worldagent.search.campaign import stored_seed
+    from worldagent.search.objectives import search_keys
+
+    def key_data(keys):
+        return {tuple(int(x) for x in row) for row in np.asarray(jax.random.key_data(keys)).reshape(len(keys), -1)}
+
+    setup = experiments.setup("racing", "driver", racing_generator, repeats=2)
+    with RunStore(tmp_path) as store:
+        found = experiments.atlas(store, setup, "reward", budget=21, seed=3, cells=2, failure="crash_rate > 0.5", progress=False, confirm=3)
+        confirmed, name = found["confirmed"], found["evaluations"][0].campaign
+        campaign = store.campaign(name)
+        searched = set().union(*(key_data(search_keys(stored_seed(campaign, e.generation, e.slot), 2)) for e in found["evaluations"]))
+        fresh = set().union(*(key_data(confirmation_keys(row["confirmation_seed"], 3)) for row in confirmed["cells"]))
+        assert len(searched) == 21 * 2 and len(fresh) == 3 * confirmed["distinct_worlds"] and searched.isdisjoint(fresh)
+        assert len(store.selections(f"atlas:{name}")) == confirmed["elites"] == len(found["archive"].cells)
+        assert len(store.confirmations()) == confirmed["distinct_worlds"] and confirmed["episodes"] == 3 * confirmed["distinct_worlds"]
+        # the report's path: the stored confirmations re-read with no agent give the same corrected archive
+        atlas = read_atlas(store, name)
+        elites = stored_elites(store, atlas, agent_key(setup), 3, 3)
+        again = corrected_summary(
+            atlas.grid, atlas.archive, elites, "return", found["qd_offset"], False, experiments.failure_selection("crash_rate > 0.5", "racing")
+        )
+        assert again == confirmed
+        assert stored_elites(store, atlas, agent_key(setup), 3, 4) is None  # other repeats: not confirmed

@@ -14,8 +14,12 @@ The bases, each a number ``worldagent diff`` reports (B is the new agent, A the 
 - ``METRIC_drop`` (mean of A − B) and ``METRIC_increase`` (B − A) for any metric of the env or
   alias (``reward_drop``, ``return_drop``, ``crash_rate_increase``);
 - ``cvar_drop``: α-CVaR of A − α-CVaR of B (the worst 10% of worlds, of ``--metric``);
-- ``search_regressed``: regressed worlds the differential search found; ``search_drop``: the
-  largest drop of the search's objective it found (A − B, in the direction searched).
+- ``search_regressed``: distinct regressed worlds the differential search found, confirmed (B's
+  confirmed failure and A's confirmed pass on the same fresh episodes; found, when ``--confirm 0``);
+  ``search_drop``: the drop of the search's objective (A − B, in the direction searched) on its most
+  extreme world, confirmed likewise. The search keeps the worst of many noisy scores, so its found
+  figures are biased; the world-set quantities above are not (every sampled world counts) and are
+  read as measured.
 
 ``_low`` / ``_high`` read the 95% interval's bounds instead of the estimate (of
 ``p_failure_increase``, ``METRIC_drop``/``_increase``, ``cvar_drop``): ``return_drop_low > 0``
@@ -171,7 +175,12 @@ def quantities(result: Mapping) -> dict[str, float]:
         values |= _with_bounds("cvar_drop", -risk["difference"], -risk["high"], -risk["low"])
     search = result.get("search")
     if search:
-        values |= {"search_regressed": search["regressed"], "search_drop": search["largest_drop"]}
+        # a search's worlds are a selection: its figures gate on their confirmation (both agents, fresh episodes) when run
+        confirmed = search.get("confirmed")
+        if confirmed:
+            values |= {"search_regressed": confirmed["regressed"], "search_drop": confirmed["largest_drop"]["mean"]}
+        else:
+            values |= {"search_regressed": search["regressed"], "search_drop": search["largest_drop"]}
     return values
 
 

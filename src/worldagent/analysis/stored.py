@@ -113,6 +113,65 @@ def read_estimate(store, name: str) -> fr.Estimate:
     return fr.monte_carlo(evaluate, dim, config["worlds"], **common)
 
 
+HITS_CONFIRMED = 20  # distinct hit worlds of an estimate listed and confirmed (in the order drawn)
+
+
+def hits_of(store: RunStore, name: str, selection: Any) -> list:
+    """The evaluations of estimate campaign ``name`` in the event (its "hits", on their own episodes), in the order drawn."""
+    found = store.evaluations(name)
+    return [e for e, hit in zip(found, selection.mask(found) if found else []) if hit]
+
+
+def confirm_hits(
+    store: RunStore,
+    setup: Any,
+    selection: Any,
+    name: str,
+    *,
+    seed: int,
+    repeats: int | None = None,
+    limit: int = HITS_CONFIRMED,
+    progress: bool = True,
+) -> dict | None:
+    """The first ``limit`` distinct hit worlds of estimate ``name`` replayed on ``repeats`` fresh episodes (``analysis.confirm``;
+    stored, resumable, named ``failure-rate:<name>``): how many still fail.
+
+    The estimate itself needs no confirmation: every world drawn counts, in the event or not, so P is unbiased
+    over the prior. A hit, though, is a world picked for having failed on a few episodes; listed as a failure,
+    it is confirmed. In Monte Carlo's order the first hits are a random sample of them, so the share that
+    survives estimates the share among all hits.
+
+    Args:
+        repeats: fresh episodes per hit (None: ``analysis.confirm.REPEATS``; 0 skips).
+
+    Returns:
+        None when ``repeats`` is 0, else {"campaign", "hits" (evaluations in the event), "distinct_hits", "checked",
+        ``confirm.confirmed_summary``'s counts, "worlds": ``ConfirmedWorld.as_dict`` per checked world}.
+    """
+    from worldagent.analysis.confirm import REPEATS, arrays_of, confirm, confirmed_summary
+    from worldagent.store import world_digest
+
+    repeats = REPEATS if repeats is None else int(repeats)
+    if repeats == 0:
+        return None
+    hits = hits_of(store, name, selection)
+    digests = [world_digest(arrays_of(store, setup, e)) for e in hits]
+    firsts: dict[str, Any] = {}
+    for digest, hit in zip(digests, hits):
+        firsts.setdefault(digest, hit)  # the first evaluation of each world
+    picks = list(firsts.values())[: max(0, int(limit))]
+    confirmed = confirm(store, setup, picks, name=f"failure-rate:{name}", repeats=repeats, seed=seed, progress=progress)
+    metrics = list(selection.metrics)
+    return {
+        "campaign": name,
+        "hits": len(hits),
+        "distinct_hits": len(set(digests)),
+        "checked": len(picks),
+        **confirmed_summary(confirmed, selection),
+        "worlds": [c.as_dict(metrics, selection) for c in confirmed],
+    }
+
+
 def timing_file(store_path: Any, campaign: str) -> Path:
     """Where an importance-sampling campaign keeps the timings its plan used: ``pools/<campaign>.timing.json``."""
     return Path(store_path).parent / "pools" / f"{campaign}.timing.json"

@@ -31,7 +31,14 @@ from worldagent.errors import WorldagentError
 FAIL_IF_HELP = (
     "Fail (exit 1) when this holds, e.g. 'p_failure_increase > 0.005', 'regressed > 0', 'return_drop > 2' (repeatable; any one fails). "
     "Quantities: p_failure_increase, p_failure_a, p_failure_b, regressed, improved, METRIC_drop, METRIC_increase, cvar_drop, "
-    "search_regressed, search_drop; _low/_high read the 95% interval's bounds. Checked before any episode runs."
+    "search_regressed, search_drop; _low/_high read the 95% interval's bounds. The world-set quantities are the paired statistics "
+    "as measured (every sampled world counts); the search's are its reported worlds confirmed for A and B on fresh episodes "
+    "(distinct worlds; found with --confirm 0). Checked before any episode runs."
+)
+CONFIRM_HELP = (
+    "Fresh episodes on which each reported world (the regressed worlds, likeliest first, at most 50 distinct; the search's "
+    "regressed and most extreme worlds) is replayed for A and for B, from keys no search draws; A and B share them (common "
+    "random numbers, by design). A world is confirmed regressed when B's confirmed interval fails and A's passes. Default 64; 0 skips."
 )
 
 
@@ -64,13 +71,15 @@ def world_source(worlds: int | None, campaign: str | None, store: Path | None, d
 
 
 def check_request(
-    env, agents, generator, source, worlds, search, budget, objective, failure, metric, fail_if, descriptors, cells, repeats, seed, out
+    env, agents, generator, source, worlds, search, budget, objective, failure, metric, fail_if, descriptors, cells, repeats, seed, out, confirm=None
 ):
     """Every check that needs neither agent nor generator loaded, run first (one line naming the fix); returns the gate."""
     from worldagent.analysis.gate import parse_gate
     from worldagent.envs import registry
     from worldagent.events import parse_selection
 
+    if confirm is not None and confirm < 0:
+        raise WorldagentError(f"--confirm {confirm}; pass fresh episodes per reported world (64 by default), or 0 to skip.")
     spec = registry.get(env)
     if len(agents) != 2:
         raise WorldagentError(f"--agent given {len(agents)} time(s); pass it twice: --agent OLD --agent NEW (A, then B).")
@@ -128,6 +137,7 @@ def register(app: typer.Typer) -> None:
         stochastic: bool = stochastic_flag(),
         backend_name: str = typer.Option("local", "--backend", help="Where world batches are evaluated: local or ray (extra `ray`)."),
         ray_address: str = ray_address_flag(),
+        confirm: int = typer.Option(None, "--confirm", help=CONFIRM_HELP),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
     ) -> None:
         """Which worlds got worse? A and B on the same worlds with the same episode keys: paired differences, P(failure),
@@ -139,7 +149,7 @@ def register(app: typer.Typer) -> None:
 
         names = [n.strip() for n in descriptors.split(",")] if descriptors else None
         source = world_source(worlds, campaign, store, dataset, search)
-        args = (env, agent, generator, source, worlds, search, budget, objective, failure, metric, fail_if, names, cells, repeats, seed, out)
+        args = (env, agent, generator, source, worlds, search, budget, objective, failure, metric, fail_if, names, cells, repeats, seed, out, confirm)
         gate = check_request(*args)
         setup = differential.diff_setup(
             env, agent[0], agent[1], generator, options=given_options(env, option), greedy=greedy, stochastic=stochastic,
@@ -152,6 +162,7 @@ def register(app: typer.Typer) -> None:
             result = differential.diff(
                 run_store, setup, worlds=world_set, search=search, budget=budget, objective=objective, maximize=not minimize,
                 descriptors=names, cells=cells, failure=failure, metric=metric, gate=gate, seed=seed, progress=not quiet,
+                **({} if confirm is None else {"confirm": confirm}),
             )  # fmt: skip
         result["generator"] = str(generator.resolve()) if generator else None  # `worldagent explore OUT` opens it
         write_text(out / "diff.json", json.dumps(plain(result), indent=1))

@@ -60,6 +60,47 @@ def cost_lines(estimate) -> list[str]:
     return lines
 
 
+CONFIRM_HELP = (
+    "Fresh episodes on which each listed hit (a world in the event on its own episodes) is replayed, from keys no estimate "
+    "draws (default 64; 0 skips): found beside confirmed, and how many still fail. P itself is not confirmed: it is an "
+    "unbiased estimate over the prior (every world drawn counts, in the event or not), not a selection."
+)
+
+
+def hit_lines(hits: dict, shown: int = 5) -> list[str]:
+    """How many of an estimate's hits survive confirmation (``analysis.stored.confirm_hits``), and the first ``shown``
+    hits found beside confirmed."""
+    from worldagent.analysis.confirm import Interval
+
+    if hits is None:
+        return ["  hits not confirmed (--confirm 0): each listed hit failed on its own few episodes, a figure biased by the selection"]
+    if not hits["hits"]:
+        return ["  no hit to confirm"]
+    repeats = hits["confirmation_episodes"] // max(hits["distinct_worlds"], 1)
+    of = f"the first {hits['checked']} in the order drawn" if hits["checked"] < hits["distinct_hits"] else f"all {hits['checked']}"
+    lines = [
+        f"  hits: {hits['hits']} worlds in the event ({hits['distinct_hits']} distinct); {of} confirmed on {repeats} fresh episodes each: "
+        f"{hits['confirmed_failing']} of {hits['checked']} still fail ({hits['event']}, the confirmed interval beyond the threshold)"
+    ]
+    for row in hits["worlds"][:shown]:
+        parts = []
+        for metric in row["found"]:
+            found, fresh = Interval(**rename(row["found"][metric])), Interval(**rename(row["confirmed"][metric]))
+            parts.append(
+                f"{metric} found {found.mean:.4g} (the selection's, {found.n} episodes); confirmed {fresh.text()} ({fresh.n} fresh episodes)"
+            )
+        verdict = "still fails" if row["confirmed_failing"] else "not confirmed"
+        lines.append(f"    {row['campaign']} generation {row['generation']} slot {row['slot']}: {'; '.join(parts)} - {verdict}")
+    if len(hits["worlds"]) > shown:
+        lines.append(f"    ({shown} of {len(hits['worlds'])} shown; every confirmed hit is in failure-rate.json)")
+    return lines
+
+
+def rename(row: dict) -> dict:
+    """``Interval.as_dict``'s keys back to ``Interval``'s fields."""
+    return {"mean": row["mean"], "low": row["low"], "high": row["high"], "n": row["episodes"]}
+
+
 def register(app: typer.Typer) -> None:
     """Add ``worldagent failure-rate``."""
 
@@ -101,13 +142,26 @@ def register(app: typer.Typer) -> None:
         stochastic: bool = stochastic_flag(),
         backend_name: str = backend_flag(),
         ray_address: str = ray_address_flag(),
+        confirm: int = typer.Option(None, "--confirm", help=CONFIRM_HELP),
+        hits: int = typer.Option(20, "--hits", help="Distinct hit worlds of each estimate listed and confirmed, in the order drawn."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
     ) -> None:
-        """The probability of an event (a failure) for worlds z ~ N(0, I), with a 95% interval and the episodes spent."""
+        """The probability of an event (a failure) for worlds z ~ N(0, I), with a 95% interval and the episodes spent; the
+        worlds it hit confirmed on fresh episodes (P is unbiased and stays as estimated; the listed hits are a selection)."""
+        import json
+
         from worldagent import experiments
         from worldagent.analysis.failure_rate import check_budget, methods
+        from worldagent.analysis.stored import campaign_name, confirm_hits
+        from worldagent.errors import WorldagentError
         from worldagent.events import parse_selection
+        from worldagent.files import write_text
         from worldagent.store import RunStore
+
+        if confirm is not None and confirm < 0:
+            raise WorldagentError(f"--confirm {confirm}; pass fresh episodes per listed hit (64 by default), or 0 to skip.")
+        if hits < 0:
+            raise WorldagentError(f"--hits {hits}; pass how many hit worlds to list and confirm (0: none).")
 
         counts = dict(worlds=worlds, repeats=repeats, round_worlds=round_worlds, rounds=rounds, components=components, pilot=pilot)
         check_counts({"pool": MAX_POOL, "pilot": MAX_POOL}, **counts, **({} if pool is None else {"pool": pool}))
@@ -127,7 +181,16 @@ def register(app: typer.Typer) -> None:
             found = experiments.failure_rate(
                 store, setup, event, method=method, worlds=worlds, importance=importance, target_width=width, seed=seed, progress=not quiet, say=say
             )
-        for estimate in found.values():
-            for line in (estimate_line(estimate), *cost_lines(estimate)):
+            selection = parse_selection(event, env)
+            confirmed = {
+                m: confirm_hits(
+                    store, setup, selection, campaign_name(m, selection.text, seed), seed=seed, repeats=confirm, limit=hits, progress=not quiet
+                )
+                for m in found
+            }
+        for m, estimate in found.items():
+            for line in (estimate_line(estimate), *cost_lines(estimate), *hit_lines(confirmed[m])):
                 console.print(line, markup=False, highlight=False)
-        console.print(f"-> {out / 'store.sqlite'}", markup=False, highlight=False)
+        written = {m: {"estimate": estimate.as_dict(), "hits": confirmed[m]} for m, estimate in found.items()}
+        write_text(out / "failure-rate.json", json.dumps({"event": event, "seed": seed, **written}, indent=1, default=float) + "\n")
+        console.print(f"-> {out / 'store.sqlite'}, {out / 'failure-rate.json'}", markup=False, highlight=False)

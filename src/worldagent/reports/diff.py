@@ -35,8 +35,15 @@ def failure_lines(worlds: dict) -> list[str]:
     return [
         f"P(failure), failure = `{failure['event']}`: A {number(a['p'])} {interval(a)}, B {number(b['p'])} {interval(b)}; "
         f"B − A {number(difference['value'])} {interval(difference)} (Tango's paired score interval; exact McNemar p = {number(difference['p_value'], 3)}).",
-        f"{failure['regressed']} worlds regressed (fail under B, pass under A), {failure['improved']} improved, of {failure['worlds']}.",
+        f"{failure['regressed']} worlds regressed (fail under B, pass under A){distinct_note(failure)}, {failure['improved']} improved, "
+        f"of {failure['worlds']} (the sampled worlds' own episodes).",
     ]
+
+
+def distinct_note(failure: dict) -> str:
+    """ " (9 distinct worlds)" where repair made some sampled worlds one world, else ""."""
+    distinct = failure.get("regressed_distinct")
+    return "" if distinct is None or distinct == failure["regressed"] else f" ({distinct} distinct worlds)"
 
 
 def cvar_line(worlds: dict) -> str:
@@ -67,12 +74,63 @@ def search_lines(search: dict) -> list[str]:
     direction = "highest" if search["maximize"] else "lowest"
     first = search["first_regressed"]
     found = f"the first at evaluation {first}" if first else "none"
-    return [
+    evaluations = search.get("regressed_evaluations", search["regressed"])
+    counted = f"{search['regressed']} distinct regressed worlds found" + (
+        f" ({evaluations} evaluations)" if evaluations != search["regressed"] else ""
+    )
+    lines = [
         f"Differential search ({search['search']}, campaign `{search['campaign']}`): {search['evaluations']} worlds, {search['episodes']} episodes, "
         f"{direction} {search['metric']}(B) − {search['metric']}(A).",
         f"Most extreme world: {best['campaign']} {best['generation']}/{best['slot']}, {search['metric']} A {number(best['a'])} → B {number(best['b'])} "
-        f"(B − A {number(best['score'])}); {search['regressed']} regressed worlds found, {found}.",
+        f"(B − A {number(best['score'])}, the search's figure); {counted}, {found}.",
     ]
+    confirmed = search.get("confirmed")
+    if confirmed:
+        drop = confirmed["largest_drop"]
+        lines.append(
+            f"Confirmed on {confirmed['repeats']} fresh episodes per agent (A and B on the same keys): the most extreme world's drop "
+            f"{number(drop['mean'])} [{number(drop['low'])}, {number(drop['high'])}] (found {number(search['largest_drop'])}); "
+            + confirmed_count(confirmed)
+        )
+    return lines
+
+
+def confirmed_count(confirmed: dict) -> str:
+    """ "3 of 12 distinct regressed worlds checked are confirmed regressed (…)"."""
+    checked, found = confirmed["checked"], confirmed["found_regressed"]
+    of = f"{checked} distinct regressed worlds checked" + (f" (the likeliest {checked} of {found})" if checked < found else "")
+    return (
+        f"{confirmed['regressed']} of {of} are confirmed regressed (B's confirmed interval fails `{confirmed['event']}` and A's passes; "
+        f"B confirmed failing on {confirmed['b_confirmed_failing']}, A confirmed passing on {confirmed['a_confirmed_passing']})."
+    )
+
+
+def side_text(side: dict, metric: str) -> str:
+    """ "0.75 → 0.41 [0.29, 0.53]": one agent's found (the selection's) and confirmed mean of ``metric``."""
+    found, confirmed = side["found"][metric], side["confirmed"][metric]
+    return f"{number(found['mean'])} → {number(confirmed['mean'])} [{number(confirmed['low'])}, {number(confirmed['high'])}]"
+
+
+def confirmed_table(confirmed: dict | None, title: str) -> list[str]:
+    """The confirmed worlds: each agent's found → confirmed figure of each metric, the paired B − A failure rate, the verdict."""
+    if not confirmed or not confirmed["worlds"]:
+        return []
+    shown = list(confirmed["worlds"][0]["a"]["found"])
+    head = "| world | " + " | ".join(f"{m} A: found → confirmed | {m} B: found → confirmed" for m in shown)
+    lines = [
+        f"**{title}** ({confirmed['repeats']} fresh episodes per agent, the same keys for both)",
+        "",
+        head + " | B − A failure rate | regressed? |",
+    ]
+    lines.append("|---" * (2 * len(shown) + 3) + "|")
+    for row in confirmed["worlds"]:
+        cells = " | ".join(f"{side_text(row['a'], m)} | {side_text(row['b'], m)}" for m in shown)
+        difference = row["failure_rate_difference"]
+        verdict = "confirmed" if row["confirmed_regressed"] else "not confirmed"
+        lines.append(
+            f"| {row['campaign']} {row['generation']}/{row['slot']} | {cells} | {number(difference['mean'])} {interval(difference)} | {verdict} |"
+        )
+    return lines
 
 
 def gate_lines(gate: dict | None) -> list[str]:
@@ -98,9 +156,13 @@ def markdown(result: dict) -> str:
         lines += [f"On {worlds['worlds']} worlds ({source_text(result['source'])}), campaign `{worlds['campaign']}`:", "", *metric_table(worlds), ""]
         lines += [*failure_lines(worlds), "", cvar_line(worlds), ""]
         lines += [*regressed_table(worlds["regressed_worlds"], "Regressed worlds, likeliest under the prior first"), ""]
+        if worlds.get("confirmed"):
+            lines += [f"Confirmed: {confirmed_count(worlds['confirmed'])}", ""]
+            lines += [*confirmed_table(worlds["confirmed"], "Regressed worlds confirmed for A and B"), ""]
     if result.get("search"):
         lines += [*search_lines(result["search"]), ""]
-        lines += [*regressed_table(result["search"]["regressed_worlds"], "Regressed worlds the search found"), ""]
+        lines += [*regressed_table(result["search"]["regressed_worlds"], "Regressed worlds the search found (one row per distinct world)"), ""]
+        lines += [*confirmed_table(result["search"].get("confirmed"), "The search's regressed worlds confirmed for A and B"), ""]
     lines += gate_lines(result.get("gate"))
     return "\n".join(lines).rstrip() + "\n"
 
@@ -127,6 +189,8 @@ def console_lines(result: dict) -> list[str]:
             f"{main} A {number(row['a'])}, B {number(row['b'])}, B − A {number(row['difference'])} {interval(row)}"
         )
         lines += failure_lines(worlds) + [cvar_line(worlds)]
+        if worlds.get("confirmed"):
+            lines.append(f"confirmed on {worlds['confirmed']['repeats']} fresh episodes per agent: {confirmed_count(worlds['confirmed'])}")
         for row in worlds["regressed_worlds"][:5]:
             near = row["nearest_passing"]
             where = "" if near is None else f"; nearest where B passes: slot {near['slot']} (distance {number(near['distance'], 3)})"

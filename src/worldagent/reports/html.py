@@ -289,15 +289,17 @@ def atlas_section(run_dir: Path, results: dict) -> str:
             ["<td>worlds evaluated (CMA-ME)</td>" + number(f"{key}.evaluations", found["evaluations"])],
             [f"<td>cells filled of {grid.size} ({' x '.join(map(str, grid.cells))}: {esc(', '.join(grid.descriptors))})</td>"]
             + [number(f"{key}.coverage", found["coverage"], 3, " coverage")],
-            ["<td>QD-score (offset: the worst world evaluated)</td>" + number(f"{key}.qd_score", found["qd_score"])],
+            ["<td>QD-score, found (the search's scores; offset: the worst world evaluated)</td>" + number(f"{key}.qd_score", found["qd_score"])],
         ]
         body = ""
         if "selection" in found:
             event = esc(found["selection"].describe())
             rows += [
-                [f"<td>failing worlds ({event})</td>" + number(f"{key}.failing", found["failing"])],
+                [f"<td>failing evaluations ({event}, the search's episodes)</td>" + number(f"{key}.failing", found["failing"])],
                 ["<td>distinct failing worlds (different after repair)</td>" + number(f"{key}.distinct_failing", found["distinct_failing"])],
             ]
+        rows += corrected_rows(key, found.get("confirmed"))
+        if "selection" in found:
             body = probability_table(env, found, res["phases"]["atlas"]["config"]) + cluster_table(found) + pair_list(run_dir, outputs)
         return (
             table(["", "value"], rows, raw_cells=True)
@@ -306,6 +308,27 @@ def atlas_section(run_dir: Path, results: dict) -> str:
         )
 
     return per_env(results, "atlas", render)
+
+
+def corrected_rows(key: str, confirmed: dict | None) -> list[list[str]]:
+    """The corrected archive (every elite replayed on fresh episodes; ``search.atlas.corrected_summary``) beside the
+    found one: QD-score and, with a failure, failing cells and distinct failing worlds."""
+    if confirmed is None:
+        return [["<td>elites confirmed on fresh episodes</td><td class='num'>no (the figures above are the search's own)</td>"]]
+    found, fresh = confirmed["found"], confirmed["confirmed"]
+    note = f"{confirmed['elites']} elites, each on {confirmed['repeats']} fresh episodes"
+    rows = [[f"<td>QD-score of the corrected archive ({note}; same offset)</td>" + number(f"{key}.confirmed.qd_score", fresh["qd_score"])]]
+    if "failing_cells" in fresh:
+        rows += [
+            ["<td>failing cells, found (the elite's search episodes)</td>" + number(f"{key}.found.failing_cells", found["failing_cells"])],
+            [
+                "<td>failing cells, confirmed (the elite's confirmed interval beyond the threshold)</td>"
+                + number(f"{key}.confirmed.failing_cells", fresh["failing_cells"])
+            ],
+            ["<td>distinct failing worlds among the elites, found</td>" + number(f"{key}.found.failing_worlds", found["failing_worlds"])],
+            ["<td>distinct failing worlds among the elites, confirmed</td>" + number(f"{key}.confirmed.failing_worlds", fresh["failing_worlds"])],
+        ]
+    return rows
 
 
 def probability_table(env: str, found: dict, config: dict) -> str:

@@ -133,26 +133,32 @@ def store_results(spec, store, done: dict) -> dict:
 
 
 def atlas_results(spec, store, outputs: dict) -> dict:
-    """The atlas phase's numbers recomputed from the store: the archive's coverage and QD-score, the
-    failing and distinct failing worlds, their groups, and each failure-rate estimate replayed."""
+    """The atlas phase's numbers recomputed from the store: the archive's coverage and QD-score, the corrected
+    archive's (its elites' stored confirmations), the failing and distinct failing worlds, their groups, and each
+    failure-rate estimate replayed."""
     from worldagent.analysis import failure_rate as fr
     from worldagent.analysis.explanations import clusters
     from worldagent.analysis.stored import campaign_name, read_estimate
     from worldagent.errors import WorldagentError
     from worldagent.events import parse_selection
-    from worldagent.search.atlas import distinct_count, qd_offset, read_atlas
+    from worldagent.search.atlas import corrected_summary, distinct_count, qd_offset, read_atlas, stored_elites
 
     atlas = read_atlas(store, outputs["campaign"])
     scores = np.array([e.score for e in atlas.evaluations], np.float64)
+    offset = qd_offset(scores, atlas.maximize)
     found: dict[str, Any] = {
         "atlas": atlas,
         "evaluations": len(atlas.evaluations),
         "coverage": atlas.archive.coverage(atlas.grid),
-        "qd_score": atlas.archive.qd_score(qd_offset(scores, atlas.maximize), atlas.maximize),
+        "qd_score": atlas.archive.qd_score(offset, atlas.maximize),
     }
-    if not outputs.get("failure"):
+    selection = parse_selection(outputs["failure"], spec.name) if outputs.get("failure") else None
+    kept = outputs.get("confirmation")
+    elites = stored_elites(store, atlas, kept["agent"], kept["seed"], kept["repeats"]) if kept else None
+    if elites is not None:
+        found["confirmed"] = corrected_summary(atlas.grid, atlas.archive, elites, atlas.campaign.objective, offset, atlas.maximize, selection)
+    if selection is None:
         return found
-    selection = parse_selection(outputs["failure"], spec.name)
     failing = np.flatnonzero(selection.mask(atlas.evaluations))
     latents = np.stack([atlas.evaluations[i].latent for i in failing]) if len(failing) else np.zeros((0, 1))
     found |= {

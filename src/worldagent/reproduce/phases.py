@@ -398,13 +398,14 @@ POOL_PER_WORLD = 20  # the surrogate's pool of described prior worlds, per world
 
 
 def atlas_phase(ctx: EnvContext) -> dict:
-    """A failure atlas of the agents (CMA-ME over the spec's default descriptors), why its failures
-    happen (nearest passing worlds, failure groups), and how likely ``spec.failure`` is (Monte Carlo
-    and importance sampling)."""
+    """A failure atlas of the agents (CMA-ME over the spec's default descriptors) with every elite confirmed on
+    fresh episodes (the corrected archive, found beside confirmed), why its failures happen (nearest passing
+    worlds, failure groups), and how likely ``spec.failure`` is (Monte Carlo and importance sampling)."""
     budgets, layout, spec = ctx.budgets, ctx.layout, ctx.spec
     if budgets.atlas_budget < 1:
         return skipped_for_budget(ctx, "atlas_budget")
     from worldagent import experiments
+    from worldagent.analysis.confirm import ELITE_REPEATS, agent_key
     from worldagent.reports.atlas import atlas_figure, counterfactual_figure
 
     setup, failure = ctx.setup(), spec.failure or None
@@ -419,6 +420,8 @@ def atlas_phase(ctx: EnvContext) -> dict:
             "campaign": found["evaluations"][0].campaign,
             "figure": layout.rel(figure),
             "failure": failure,
+            # which stored confirmations are the elites' (the report re-reads them): the agent, the seed and the repeats
+            "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": ELITE_REPEATS},
         }
         if failure:
             explained = experiments.explain_failures(setup, found, experiments.failure_selection(failure, ctx.env), seed=ctx.seed)
@@ -428,7 +431,17 @@ def atlas_phase(ctx: EnvContext) -> dict:
             outputs["estimates"] = failure_rates(ctx, store, setup) if budgets.failure_worlds else {}
     rates = "; ".join(f"{m} P = {e['estimate']:.3g}" if "estimate" in e else f"{m}: {e['error']}" for m, e in outputs.get("estimates", {}).items())
     failing = "" if found["distinct_failing"] is None else f", {found['distinct_failing']} distinct failing worlds"
-    outputs["summary"] = f"coverage {found['coverage']:.2f}, QD-score {found['qd_score']:.4g}{failing}" + (f"; {rates}" if rates else "")
+    summary = f"coverage {found['coverage']:.2f}, QD-score {found['qd_score']:.4g}{failing}"
+    confirmed = found["confirmed"]
+    if confirmed is not None:
+        outputs["confirmed"] = {key: confirmed[key] for key in ("repeats", "elites", "distinct_worlds", "episodes", "found", "confirmed")}
+        outputs["confirmed"]["no_longer_failing"] = confirmed.get("no_longer_failing", [])
+        fresh = confirmed["confirmed"]
+        cells = ""
+        if "failing_cells" in fresh:
+            cells = f", failing cells found {confirmed['found']['failing_cells']} -> confirmed {fresh['failing_cells']}"
+        summary += f" (found); elites on {confirmed['repeats']} fresh episodes: QD-score {fresh['qd_score']:.4g}{cells}"
+    outputs["summary"] = summary + (f"; {rates}" if rates else "")
     return outputs
 
 

@@ -13,6 +13,15 @@ keeps the world with the best objective (the lowest return, when looking for fai
   latent (G(z) then the spec's descriptor functions), so a replay rebuilds the same archive.
 - ``archive_of``: any campaign's evaluations (QD, CMA-ES, random) placed on a grid, so that
   QD-score, coverage and the number of distinct failing worlds compare on equal terms.
+- ``confirm_elites`` / ``corrected_summary``: the **corrected archive** of Uncertain Quality-Diversity
+  (Flageat & Cully 2023): every elite (the best world of a filled cell) replayed on fresh episodes
+  (``analysis.confirm``, ``ELITE_REPEATS`` each) and re-scored by them. An elite is the best of many
+  noisy scores, so the found archive is biased the way of the search; the corrected one is not.
+  Descriptors are a function of the world, not of the episodes, so no elite changes cell: coverage
+  stays (a cell whose fresh episodes give no finite value drops out), the QD-score (same offset)
+  and the failing cells change. A cell is *confirmed failing* when its elite's confirmed interval
+  is beyond the failure threshold (``ConfirmedWorld.holds``); found-failing cells that are not are
+  reported as no longer failing. Counts of failing worlds count distinct repaired worlds.
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ import numpy as np
 
 from worldagent.errors import WorldagentError
 from worldagent.search.optimisers import Optimiser
-from worldagent.store import world_digest
+from worldagent.store import Evaluation, world_digest
 
 RANGE_SAMPLES = 512  # prior latents whose descriptors set the grid's ranges
 
@@ -314,3 +323,284 @@ def read_atlas(store: Any, name: str) -> StoredAtlas:
     measures = np.array([[f(spec.world_from_arrays(e.world)) for f in functions] for e in evaluations], np.float64).reshape(-1, len(functions))
     scores = np.array([e.score for e in evaluations], np.float64)
     return StoredAtlas(campaign, grid, evaluations, measures, archive_of(grid, scores, measures, bool(campaign.maximize)))
+
+
+# -- the corrected archive (elites confirmed on fresh episodes) ------------------------------------
+
+
+def elites_of(evaluations: Sequence[Evaluation], archive: Archive) -> list[Evaluation]:
+    """The best evaluation of each filled cell, in the archive's order."""
+    return [evaluations[int(i)] for i in archive.best]
+
+
+def corrected_archive(archive: Archive, confirmed: Sequence[Any], metric: str) -> Archive:
+    """``archive`` re-scored by its elites' confirmations (``ConfirmedWorld`` s, one per filled cell, in
+    order): each cell keeps its elite (descriptors do not depend on episodes) with the confirmed mean of
+    ``metric``; cells whose fresh episodes give no finite value drop out."""
+    if len(confirmed) != len(archive.cells):
+        raise WorldagentError(f"{len(confirmed)} confirmed elites for an archive of {len(archive.cells)} cells; confirm every elite.")
+    scores = np.array([c.confirmed(metric).mean for c in confirmed], np.float64)
+    keep = np.flatnonzero(np.isfinite(scores))
+    return Archive(archive.cells[keep], archive.best[keep], scores[keep], archive.measures[keep])
+
+
+def failing_worlds(confirmed: Sequence[Any], which: Sequence[bool]) -> int:
+    """How many distinct repaired worlds the confirmed elites marked by ``which`` are."""
+    return len({c.digest for c, bad in zip(confirmed, which) if bad})
+
+
+def corrected_summary(
+    grid: Grid, archive: Archive, confirmed: Sequence[Any], metric: str, offset: float, maximize: bool, selection: Any = None
+) -> dict:
+    """Found beside corrected: coverage, QD-score (``offset``: the found archive's, so the two compare) and,
+    with ``selection`` (the failure), failing cells and distinct failing worlds.
+
+    Args:
+        grid, archive: the found archive (``archive_of``); confirmed: ``ConfirmedWorld`` per filled cell, in order.
+        metric: the archive's (canonical) metric; maximize: its direction.
+        selection: the failure event (``events.parse_selection``) or None.
+
+    Returns:
+        {"repeats", "elites", "distinct_worlds", "episodes", "found": {"coverage", "qd_score"[, "failing_cells",
+        "failing_worlds"]}, "confirmed": the same of the corrected archive, "cells": one row per filled cell
+        ({"cell", descriptors, ``ConfirmedWorld.as_dict``}), "no_longer_failing": cells found failing but not
+        confirmed failing}.
+    """
+    corrected = corrected_archive(archive, confirmed, metric)
+    distinct = {c.digest: c for c in confirmed}
+    summary: dict = {
+        "metric": metric,
+        "repeats": max((c.repeats for c in confirmed), default=0),
+        "elites": len(confirmed),
+        "distinct_worlds": len(distinct),
+        "episodes": sum(c.repeats for c in distinct.values()),
+        "found": {"coverage": archive.coverage(grid), "qd_score": archive.qd_score(offset, maximize)},
+        "confirmed": {"coverage": corrected.coverage(grid), "qd_score": corrected.qd_score(offset, maximize)},
+    }
+    metrics = [metric, *([] if selection is None else [m for m in selection.metrics if m != metric])]
+    cells = [
+        {"cell": int(cell), **dict(zip(grid.descriptors, map(float, archive.measures[i]))), **c.as_dict(metrics, selection)}
+        for i, (cell, c) in enumerate(zip(archive.cells, confirmed))
+    ]
+    if selection is not None:
+        found = [bool(selection.mask([c.selected])[0]) for c in confirmed]
+        holds = [c.holds(selection) for c in confirmed]
+        summary["event"] = selection.describe()
+        summary["found"] |= {"failing_cells": int(sum(found)), "failing_worlds": failing_worlds(confirmed, found)}
+        summary["confirmed"] |= {"failing_cells": int(sum(holds)), "failing_worlds": failing_worlds(confirmed, holds)}
+        summary["no_longer_failing"] = [row["cell"] for row, bad, held in zip(cells, found, holds) if bad and not held]
+    summary["cells"] = cells
+    return summary
+
+
+def confirm_elites(
+    store: Any, setup: Any, found: dict, metric: str, maximize: bool, selection: Any = None, *, repeats: int, seed: int, progress: bool = True
+) -> dict | None:
+    """Every elite of an atlas (one campaign's ``experiments.atlas_summary`` entry) confirmed on ``repeats`` fresh
+    episodes (``analysis.confirm``; stored, resumable, named ``atlas:<campaign>``), and ``corrected_summary``.
+    None when ``repeats`` is 0 (skipped) or the archive is empty."""
+    from worldagent.analysis.confirm import confirm
+
+    archive = found["archive"]
+    if repeats == 0 or not len(archive.cells):
+        return None
+    elites = elites_of(found["evaluations"], archive)
+    confirmed = confirm(store, setup, elites, name=f"atlas:{elites[0].campaign}", repeats=repeats, seed=seed, progress=progress)
+    return corrected_summary(found["grid"], archive, confirmed, metric, found["qd_offset"], maximize, selection)
+
+
+def stored_elites(store: Any, atlas: StoredAtlas, agent: str, seed: int, repeats: int) -> list[Any] | None:
+    """The confirmations of ``atlas``'s elites already in ``store`` (for ``analysis.confirm.agent_key`` ``agent``,
+    ``seed`` and ``repeats``) as ``ConfirmedWorld`` s; None unless every elite has one. Needs no agent."""
+    from worldagent.analysis.confirm import ConfirmedWorld, confirmation_seed
+
+    done = {c.world: c for c in store.confirmations(agent, atlas.campaign.env) if c.seed == int(seed) and c.repeats == int(repeats)}
+    found = []
+    for elite in elites_of(atlas.evaluations, atlas.archive):
+        digest = world_digest(elite.world)
+        if digest not in done:
+            return None
+        found.append(ConfirmedWorld(elite, digest, done[digest].episodes, confirmation_seed(seed, digest)))
+    return found
+
+
+def cell_line(row: dict, descriptors: Sequence[str], metric: str) -> str:
+    """ "cell 12 (total_curvature 5.2, sharpest_corner 1.1): crash_rate found 0.75 (the selection's, 8 episodes);
+    confirmed 0.41 [0.29, 0.53] (32 fresh episodes)" of a ``corrected_summary`` cell row."""
+    found, confirmed = row["found"][metric], row["confirmed"][metric]
+    where = ", ".join(f"{name} {row[name]:.3g}" for name in descriptors)
+    return (
+        f"cell {row['cell']} ({where}): {metric} found {found['mean']:.4g} (the selection's, {found['episodes']} episodes); "
+        f"confirmed {confirmed['mean']:.4g} [{confirmed['low']:.4g}, {confirmed['high']:.4g}] ({confirmed['episodes']} fresh episodes)"
+    )
+
+
+# -- atlases that survive noise (issue 50; Flageat & Cully 2023, "Uncertain Quality-Diversity") -----------------
+
+
+ADAPTIVE_REEVALUATIONS = 3  # re-evaluation slots per adaptive-sampling generation (18 offspring + 3)
+CHALLENGE_EVALUATIONS = 4  # a challenger replaces an elite once it has min(this, the elite's) evaluations
+
+
+class CorrectedQD(QDOptimiser):
+    """CMA-ME for ``search_generations`` generations, then a corrected archive: every later generation re-asks
+    the elites with the best pooled means (each elite: the cell's best world by the search's single scores), so a
+    lucky elite is played again and falls back, and the next is re-asked. ``elites()`` is the corrected archive.
+    """
+
+    name = "cma-me-corrected"
+
+    def __init__(self, dim, maximize, seed, grid: Grid, describe: Callable, config: QDConfig = QDConfig(), search_generations: int = 1):
+        super().__init__(dim, maximize, seed, grid, describe, config)
+        from worldagent.search.optimisers import Pooled
+
+        if search_generations < 1:
+            raise WorldagentError(f"search_generations={search_generations}; search at least one generation before re-evaluating.")
+        self.search_generations, self.generation = int(search_generations), 0
+        self.pooled = Pooled(dim)
+        self.cells: dict[int, bytes] = {}  # cell -> its elite's latent key
+        self.first: dict[bytes, float] = {}  # a latent's first score ("lower is better")
+        self._pending: np.ndarray | None = None
+
+    def ask(self, n: int) -> np.ndarray:
+        if n != self._size:
+            raise WorldagentError(f"{self.name} asks a whole generation of {self._size}; asked for {n}.")
+        if self._pending is not None:
+            raise WorldagentError(f"{self.name}: tell() the scores of the last generation before asking again.")
+        self._pending = self.offspring() if self.generation < self.search_generations else self.best_elites(n)
+        return self._pending.copy()
+
+    def offspring(self) -> np.ndarray:
+        return np.asarray(self.scheduler.ask(), np.float64)
+
+    def best_elites(self, n: int) -> np.ndarray:
+        """f64[n, dim]: the elites with the best pooled means (cycled when there are fewer than ``n``)."""
+        order = {key: i for i, key in enumerate(self.pooled.latents)}  # the earliest first on ties
+        elites = sorted(self.cells.values(), key=lambda key: (self.pooled.sums[key] / self.pooled.counts[key], order[key]))
+        if not elites:
+            raise WorldagentError(f"{self.name}: no elite to re-evaluate; search at least one generation first.")
+        latents = [self.pooled.latents[k] for k in elites]
+        return np.array([latents[i % len(latents)] for i in range(n)], np.float64)
+
+    def tell(self, z: np.ndarray, scores: np.ndarray) -> None:
+        z, scores = self._checked(z, scores)
+        if self._pending is None or not np.array_equal(z, self._pending):
+            raise WorldagentError(f"{self.name} must be told the scores of exactly the generation it asked for.")
+        minimised = self._minimised(scores)
+        if self.generation < self.search_generations:
+            self.place(z, minimised)
+        self.pooled.add(z, minimised)
+        self._pending = None
+        self.generation += 1
+
+    def place(self, z: np.ndarray, minimised: np.ndarray) -> None:
+        """Tell the emitters a generation of offspring and keep each cell's best by these single scores."""
+        from worldagent.search.optimisers import latent_key
+
+        measures = self.describe(z)
+        self.scheduler.tell(-minimised, measures)  # pyribs maximises
+        for latent, score, cell in zip(z, minimised, cell_of(self.grid, measures)):
+            key = latent_key(latent)
+            self.first.setdefault(key, float(score))
+            elite = self.cells.get(int(cell))
+            if elite is None or score < self.first[elite]:
+                self.cells[int(cell)] = key
+
+    def elites(self) -> dict[int, tuple[np.ndarray, float, int]]:
+        """{cell: (latent, pooled mean in the search's direction, evaluations)}: the archive as corrected so far."""
+        rows = {}
+        for cell, key in sorted(self.cells.items()):
+            mean = self.pooled.sums[key] / self.pooled.counts[key]
+            rows[cell] = (self.pooled.latents[key].copy(), -mean if self.maximize else mean, self.pooled.counts[key])
+        return rows
+
+
+class AdaptiveQD(CorrectedQD):
+    """CMA-ME with adaptive sampling (Justesen et al. 2019, one of Uncertain QD's methods): each generation is the
+    emitters' offspring and ``ADAPTIVE_REEVALUATIONS`` re-evaluations. An offspring that lands in an empty cell is
+    its elite; one whose score beats the cell's elite's pooled mean is a challenger, re-asked until it has
+    ``min(CHALLENGE_EVALUATIONS, the elite's evaluations)`` evaluations, and takes the cell only if its pooled
+    mean still beats the elite's. Slots no challenger needs re-ask the elites with the best pooled means.
+    ``config.emitters × config.batch`` offspring (default 3 × 6: 21 a generation with the re-evaluations).
+    """
+
+    name = "cma-me-adaptive"
+
+    def __init__(self, dim, maximize, seed, grid: Grid, describe: Callable, config: QDConfig = QDConfig(batch=6)):
+        super().__init__(dim, maximize, seed, grid, describe, config, search_generations=1)
+        self._offspring = self._size
+        self._size = self._offspring + ADAPTIVE_REEVALUATIONS
+        self.challengers: list[tuple[int, bytes]] = []  # (cell, latent key), oldest first
+
+    def ask(self, n: int) -> np.ndarray:
+        if n != self._size:
+            raise WorldagentError(f"{self.name} asks a whole generation of {self._size}; asked for {n}.")
+        if self._pending is not None:
+            raise WorldagentError(f"{self.name}: tell() the scores of the last generation before asking again.")
+        fresh = self.offspring()
+        again = [self.pooled.latents[key] for _, key in self.challengers[:ADAPTIVE_REEVALUATIONS]]
+        if len(again) < ADAPTIVE_REEVALUATIONS:
+            rest = ADAPTIVE_REEVALUATIONS - len(again)
+            again += list(self.best_elites(rest) if self.cells else fresh[:rest])  # nothing scored yet: the round's own
+        self._pending = np.vstack([fresh, np.asarray(again, np.float64).reshape(-1, self.dim)])
+        return self._pending.copy()
+
+    def tell(self, z: np.ndarray, scores: np.ndarray) -> None:
+        from worldagent.search.optimisers import latent_key
+
+        z, scores = self._checked(z, scores)
+        if self._pending is None or not np.array_equal(z, self._pending):
+            raise WorldagentError(f"{self.name} must be told the scores of exactly the generation it asked for.")
+        minimised = self._minimised(scores)
+        fresh = slice(0, self._offspring)
+        self.pooled.add(z, minimised)
+        measures = self.describe(z[fresh])
+        self.scheduler.tell(-minimised[fresh], measures)
+        for latent, score, cell in zip(z[fresh], minimised[fresh], cell_of(self.grid, measures)):
+            key, cell = latent_key(latent), int(cell)
+            elite = self.cells.get(cell)
+            if elite is None:
+                self.cells[cell] = key
+            elif key != elite and score < self.mean(elite):
+                self.challengers.append((cell, key))
+        self.settle()
+        self._pending = None
+        self.generation += 1
+
+    def mean(self, key: bytes) -> float:
+        return self.pooled.sums[key] / self.pooled.counts[key]
+
+    def settle(self) -> None:
+        """Decide every challenger that has enough evaluations; drop those that no longer beat their elite."""
+        waiting = []
+        for cell, key in self.challengers:
+            elite = self.cells[cell]
+            if self.mean(key) >= self.mean(elite):
+                continue  # fell back: the elite stays
+            if self.pooled.counts[key] >= min(CHALLENGE_EVALUATIONS, self.pooled.counts[elite]):
+                self.cells[cell] = key
+            else:
+                waiting.append((cell, key))
+        self.challengers = waiting
+
+
+def noisy_atlas_optimiser(
+    spec: Any, generator: Any, maximize: bool, seed: int, budget: int, method: str, descriptors: Sequence[str] | None = None, cells: int = 10
+) -> tuple[QDOptimiser, dict]:
+    """``atlas_optimiser``'s grid with a noise-aware atlas: ``method`` "corrected" (CMA-ME for 70% of ``budget``,
+    whole generations, then its elites re-evaluated) or "adaptive" (adaptive sampling); and the campaign's record."""
+    names, shape = check_descriptors(spec, descriptors, cells, budget)
+    describe = describer(spec, generator, names)
+    grid = Grid(names, shape, grid_ranges(describe, generator.latent_dim, names, seed))
+    if method == "corrected":
+        config = QDConfig()
+        searching = max(1, int(0.7 * budget) // (config.emitters * config.batch))
+        optimiser: QDOptimiser = CorrectedQD(generator.latent_dim, maximize, seed, grid, describe, config, searching)
+        record = {**asdict(config), "method": method, "search_generations": searching}
+    elif method == "adaptive":
+        config = QDConfig(batch=6)
+        optimiser = AdaptiveQD(generator.latent_dim, maximize, seed, grid, describe, config)
+        record = {**asdict(config), "method": method, "reevaluations": ADAPTIVE_REEVALUATIONS, "challenge": CHALLENGE_EVALUATIONS}
+    else:
+        raise WorldagentError(f"unknown noise-aware atlas {method!r}; use corrected or adaptive.")
+    return optimiser, {"atlas": {"grid": grid.record(), **record}}

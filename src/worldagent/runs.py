@@ -250,6 +250,18 @@ class Run:
         with self.store(env) as store:
             return store.evaluations()
 
+    def random_campaign(self, env: str) -> str | None:
+        """The env's random evaluation (paper §6.1.1): the random phase's campaign, else the first stored campaign
+        named as `worldagent evaluate random` names one (``experiments.random_campaign_name``); None without one."""
+        recorded = self.outputs(env, "random").get("campaign")
+        if recorded or not self.has_store(env):
+            return recorded
+        from worldagent.experiments import random_campaign_name
+
+        with self.store(env) as store:
+            campaigns = store.campaigns()
+        return next((c.name for c in campaigns if c.optimiser == "random" and c.name == random_campaign_name(c.objective, c.seed)), None)
+
     def world(self, env: str, campaign: str, generation: int, slot: int) -> Any:
         """The stored world of one evaluation, as the env's world type (unbatched)."""
         from worldagent.envs import registry

@@ -119,6 +119,12 @@ def write_toy_run(toy_spec, run_dir):
     return run_dir
 
 
+@pytest.fixture
+def fresh_toy_run(toy_spec, tmp_path):
+    """A toy run of this test's own, to change (the shared ``toy_run`` stays as built)."""
+    return write_toy_run(toy_spec, tmp_path / "run")
+
+
 @pytest.fixture(scope="module")
 def session(toy_spec, toy_run):
     """The explorer's ``Session`` over the toy run (its generator and agents load on first use)."""

@@ -10,7 +10,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from worldagent.explore.server import make_app
-from worldagent.store import RunStore
+from worldagent.explore.session import jax_row
+from worldagent.store import RunStore, world_digest
 from worldagent.worlds.dataset import WorldDataset
 
 LOCAL = "http://127.0.0.1"
@@ -126,19 +127,61 @@ def test_failures_rank_by_prior_likelihood_and_severity(client, toy_run):
     evaluations = stored(toy_run)
     reached = np.array([np.mean([e["reached"] for e in ev.episodes]) for ev in evaluations])
     latents = np.stack([ev.latent for ev in evaluations])
+    digests = np.array([world_digest(ev.world) for ev in evaluations])
     found = client.get("/api/toy/failures?limit=500").json()
-    assert found["failing"] == int((reached < 0.5).sum()) == len(found["rows"])
+    assert found["failing"] == int((reached < 0.5).sum()) == sum(row["evaluations"] for row in found["rows"])
     priors = [row["log_prior"] for row in found["rows"]]
     assert priors == sorted(priors, reverse=True)
     np.testing.assert_allclose(priors[0], -0.5 * (latents[found["rows"][0]["index"]] ** 2).sum() - 1.5 * np.log(2 * np.pi))
     passing = np.flatnonzero(reached >= 0.5)
     for row in found["rows"]:
-        distances = np.linalg.norm(latents[passing] - latents[row["index"]], axis=1)
-        assert row["nearest_passing"] == passing[np.argmin(distances)]
+        others = passing[digests[passing] != digests[row["index"]]]  # the nearest passing world is another world
+        distances = np.linalg.norm(latents[others] - latents[row["index"]], axis=1)
+        assert row["nearest_passing"] == others[np.argmin(distances)]
     severe = client.get("/api/toy/failures?by=severity&limit=500").json()["rows"]
-    assert [r["severity"] for r in severe] == sorted((0.5 - reached[reached < 0.5]).tolist(), reverse=True)
+    worst = {}  # each failing world's most severe evaluation
+    for i in np.flatnonzero(reached < 0.5):
+        worst[digests[i]] = max(worst.get(digests[i], -np.inf), 0.5 - reached[i])
+    assert [r["severity"] for r in severe] == sorted(worst.values(), reverse=True)
     other = client.get("/api/toy/failures", params={"event": "steps > 20"}).json()
     assert other["failing"] == int((np.array([np.mean([e["steps"] for e in ev.episodes]) for ev in evaluations]) > 20).sum())
+
+
+def test_failures_count_distinct_repaired_worlds_not_latents(client, toy_run):
+    evaluations = stored(toy_run)
+    failing = [ev for ev in evaluations if np.mean([e["reached"] for e in ev.episodes]) < 0.5]
+    digests = [world_digest(ev.world) for ev in failing]
+    found = client.get("/api/toy/failures?limit=500").json()
+    # the toy run's two campaigns store the same dataset worlds at different latents: fewer worlds than latents
+    assert len({tuple(ev.latent) for ev in failing}) == len(failing) > len(set(digests))
+    assert found["distinct"] == len(set(digests)) == len(found["rows"])
+    by_world = {d: digests.count(d) for d in digests}
+    rows = {world_digest(evaluations[row["index"]].world): row["evaluations"] for row in found["rows"]}
+    assert rows == by_world
+    assert len(client.get("/api/toy/failures?limit=2").json()["rows"]) == 2
+    assert client.get("/api/toy/failures?limit=2").json()["distinct"] == found["distinct"]  # the count is of all, not of the rows shown
+
+
+def test_worlds_stored_without_arrays_are_told_apart_by_their_decoded_world(toy_spec, fresh_toy_run):
+    from worldagent.explore.session import Session
+    from worldagent.search.objectives import generate
+    from worldagent.worlds.generator import load_generator
+
+    run_dir = fresh_toy_run
+    store_path = run_dir / "toy" / "store.sqlite"
+    (z,) = [ev.latent for ev in stored(run_dir, "random-return-s0")[:1]]
+    with RunStore(store_path) as store:  # a failure-rate estimate keeps no worlds: its worlds are G(z)
+        campaign = store.open_campaign("failure-rate-s0", "toy", "return", False, "random", 2, 0, {}, resume=False)
+        for slot, latent in enumerate([z, z + 5.0]):
+            store.add(campaign, 0, slot, latent, 0.0, [{"return": 0.0, "reached": 0.0, "steps": 30.0}] * 4, 0.0)
+    session = Session.open(run_dir).env("toy")
+    indices = [i for i, e in enumerate(session.evaluations) if e.campaign in ("random-return-s0", "failure-rate-s0")]
+    generator = load_generator(run_dir / "toy" / "generator")[0]
+    decoded = generate(generator, np.stack([z, z + 5.0]))
+    expected = [world_digest(toy_spec.world_to_arrays(jax_row(decoded, k))) for k in range(2)]
+    assert session.world_keys(indices[-2:]) == expected
+    first = stored(run_dir, "random-return-s0")[0]
+    assert session.world_keys(indices[:1]) == [world_digest(first.world)]
 
 
 def test_an_atlas_cell_opens_its_worst_world(client, toy_run):
@@ -225,6 +268,22 @@ def test_a_large_body_is_refused_before_it_is_read(client):
     assert response.status_code == 413 and "64 KiB" in response.json()["error"]
     chunked = client.post("/api/toy/play", content=iter([b'{"world": 0}']), headers={"content-type": "application/json"})
     assert chunked.status_code == 411
+
+
+def test_the_map_says_the_worlds_share_from_the_stored_random_campaign(client, toy_run, fresh_toy_run):
+    from worldagent.analysis.noise import episode_values, world_share
+    from worldagent.explore.session import Session
+
+    share = client.get("/api/toy/map").json()["share"]
+    evaluations = stored(toy_run, "random-return-s0")
+    expected = world_share(episode_values(evaluations, "return"))
+    assert share["campaign"] == "random-return-s0" and share["summary"]["worlds"] == len(evaluations) and share["summary"]["repeats"] == 4
+    assert share["summary"]["metrics"]["return"]["icc"] == pytest.approx(expected.icc)
+    assert share["line"].startswith(f"random-return-s0, {len(evaluations)} worlds x 4 episodes: world's share of return {expected.icc:.2f} [")
+    assert "of the failure (reached < 0.5)" in share["line"]
+    with RunStore(fresh_toy_run / "toy" / "store.sqlite") as store:
+        store.delete_campaigns(["random-return-s0"])
+    assert Session.open(fresh_toy_run).env("toy").map_data()["share"] is None  # no random campaign: nothing said
 
 
 def test_the_map_marks_failing_worlds_and_says_what_its_axes_show(client, toy_run):

@@ -218,6 +218,9 @@ def test_a_failure_opens_and_exports(page, browser, tmp_path):
     page.wait_for_selector("#failures-table img", timeout=WAIT_MS)
     page.wait_for_function("[...document.querySelectorAll('#failures-table img')].slice(0, 12).every(i => i.naturalWidth > 0)", timeout=WAIT_MS)
     shot(page, "failures")
+    found = page.evaluate("fetch(`/api/${explorer.state.env}/failures?limit=1`).then(r => r.json())")
+    assert f"{found['failing']} of {found['worlds']} stored evaluations fail" in text(page, "#failures-summary")
+    assert f"{found['distinct']} distinct worlds (repaired worlds, not latents)" in text(page, "#failures-summary")
     first = page.locator("#failures-table img").first
     index = int(first.get_attribute("data-world"))
     first.click()
@@ -336,6 +339,8 @@ def test_every_view_names_what_it_shows(page):
     assert all(name in text(page, "#map-campaigns") for name in campaigns)
     if info["failure"]:
         assert "fails" in text(page, "#map-failing-legend")
+    share = page.evaluate("explorer.state.map.share")
+    assert share and text(page, "#map-share") == share["line"] and "world's share of" in share["line"]  # the toy run has a random campaign
     page.select_option("#map-scale", "linear")
     assert page.get_attribute("#map-canvas", "data-scale") == "linear" and "linear" in text(page, "#map-colourbar")
 

@@ -57,7 +57,6 @@ def test_atlas_cells_fold_extra_descriptors_into_the_worst_world():
     assert best[0] == {"x": 0, "y": 1, "score": 4.0, "entry": 0}
 
 
-def test_a_latent_evaluated_again_is_one_world():
-    latents = np.array([[1.0, 2.0], [0.0, 0.0], [1.0, 2.0], [1.0, 2.0]])
-    first, counts = views.distinct_latents(latents, np.array([2, 1, 0, 3]))
+def test_a_world_evaluated_again_is_one_world():
+    first, counts = views.distinct_worlds(["a", "b", "a", "a"], np.array([2, 1, 0, 3]))
     assert first.tolist() == [2, 1] and counts.tolist() == [3, 1]

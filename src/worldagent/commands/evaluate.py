@@ -91,6 +91,7 @@ def register(app: typer.Typer) -> None:
         figure = distribution_figure({"random worlds": scores}, metric, out / f"{name}.png", f"{env}: {metric} over {len(scores)} random worlds")
         line = f"{name}: {len(scores)} worlds x {repeats} episodes; {metric} mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})"
         console.print(f"{line}{normalised_note(setup, metric, evaluations)} -> {figure}")
+        say_share(setup.spec, evaluations, metric, name, out)
 
     @group.command("worlds")
     @friendly_errors
@@ -135,24 +136,59 @@ def register(app: typer.Typer) -> None:
         console.print(f"{line}{normalised_note(setup, metric, evaluations)} -> {figure}", highlight=False)
         for text in world_lines(setup.spec, given.labels, evaluations, metric):
             status_line(text)
+        say_share(setup.spec, evaluations, metric, name, out)
         if generator is None:
             status_line(f"stored in {out / STORE_FILE} without latents; pass --generator DIR to place them on `worldagent explore`'s map.")
         else:
             status_line(f"explore: worldagent explore --store {out / STORE_FILE} --generator {generator} --agent {agent}")
 
 
+def evaluation_record(spec, evaluations, metric: str, campaign: str) -> dict:
+    """What ``OUT/<campaign>.json`` holds: the campaign, its worlds and repeats, the metric's mean and sd over the
+    worlds' scores, and the world's share (``reports.results.world_share_summary``: per metric, and of the failure
+    event) when every world has at least 2 episodes."""
+    from worldagent.influence.statistics import json_safe
+    from worldagent.reports.results import world_share_summary
+
+    scores = np.array([e.score for e in evaluations], np.float64)
+    repeats = sorted({len(e.episodes) for e in evaluations})
+    record = {
+        "env": spec.name,
+        "campaign": campaign,
+        "metric": metric,
+        "worlds": len(evaluations),
+        "repeats": repeats[0] if len(repeats) == 1 else repeats,
+        "mean": float(np.nanmean(scores)) if np.isfinite(scores).any() else None,
+        "sd": float(np.nanstd(scores)) if np.isfinite(scores).any() else None,
+    }
+    return json_safe({**record, **world_share_summary(spec, evaluations, [metric])})
+
+
+def say_share(spec, evaluations, metric: str, campaign: str, out: Path) -> None:
+    """Print the world's share in one line (with 2+ episodes per world) and write ``OUT/<campaign>.json`` beside the histogram."""
+    import json
+
+    from worldagent.analysis.noise import share_line
+    from worldagent.files import write_text
+
+    record = evaluation_record(spec, evaluations, metric, campaign)
+    line = share_line(record if "metrics" in record else {}, metric)
+    if line:
+        status_line(line)
+    status_line(f"-> {write_text(out / f'{campaign}.json', json.dumps(record, indent=1))}")
+
+
 def world_lines(spec, labels, evaluations, metric: str) -> list[str]:
     """Which worlds failed (``spec.failure``, when its metrics were played), and every world of a small set, or the
     three lowest and highest of a large one, by label."""
-    from worldagent.events import parse_selection
+    from worldagent.reports.results import played_failure
 
     lines = []
-    if spec.failure:
-        selection = parse_selection(spec.failure, spec.name)
-        if all(any(m in e for e in ev.episodes) for ev in evaluations for m in selection.metrics):
-            failing = np.flatnonzero(selection.mask(evaluations))
-            named = ", ".join(labels[i] for i in failing[:SHOWN_WORLDS]) + (", ..." if len(failing) > SHOWN_WORLDS else "")
-            lines.append(f"failing ({spec.failure}): {len(failing)} of {len(evaluations)} worlds" + (f": {named}" if len(failing) else ""))
+    selection = played_failure(spec, evaluations)
+    if selection is not None:
+        failing = np.flatnonzero(selection.mask(evaluations))
+        named = ", ".join(labels[i] for i in failing[:SHOWN_WORLDS]) + (", ..." if len(failing) > SHOWN_WORLDS else "")
+        lines.append(f"failing ({spec.failure}): {len(failing)} of {len(evaluations)} worlds" + (f": {named}" if len(failing) else ""))
     if len(evaluations) <= SHOWN_WORLDS:
         return lines + [f"  {labels[e.slot]}: {metric} {e.score:.4g}" for e in evaluations]
     ranked = sorted((e for e in evaluations if np.isfinite(e.score)), key=lambda e: e.score)

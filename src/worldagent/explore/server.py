@@ -16,7 +16,7 @@ except the worlds a user saves (``POST /api/ENV/save``: a one-world dataset in `
 API (``ENV``: an environment of the run)::
 
     GET  /api/run                         the run: environments, metrics, agents, atlases
-    GET  /api/ENV/map                     every stored world: projected latent, campaign, metric means
+    GET  /api/ENV/map                     every stored world: projected latent, campaign, metric means; the world's share
     GET  /api/ENV/world/I                 stored world I: campaign, latent, metrics
     GET  /api/ENV/world/I.png             its picture          (?size=)
     GET  /api/ENV/decode.png?z=a,b,...    the picture of G(z)  (?size=)

@@ -36,6 +36,7 @@ PICTURE_CACHE = 2048  # stored worlds' PNGs kept (a 160 px picture is a few kB)
 # product with the dataset ~12x slower for one row than for two (racing quick: 390 ms against 33 ms).
 DECODE_ROWS = 2
 SAME_LATENT = 1e-9  # latents closer than this are one world (scored again by another campaign), never its own neighbour
+NEIGHBOURS_READ = 16  # a failing world's nearest passing candidates whose worlds are read at a time (the same world is skipped)
 # A play's episodes are replayed in one of these batch sizes (the first ones kept): the replay compiles per
 # batch size and agent, so 1-16 episodes cost at most two compiles an agent instead of sixteen.
 EPISODE_BUCKETS = (8, 16)
@@ -186,7 +187,31 @@ class EnvSession:
             "explained": rounded(self.projection.explained),
             "failure": failure[0].describe() if failure else None,
             "failing": failure[1].astype(int).tolist() if failure else None,
+            "share": self.world_share(),
         }
+
+    def world_share(self) -> dict | None:
+        """The world's share of the main metric and of the failure event over the stored random campaign
+        (``reports.results.world_share_summary``; no episode is played), with its one line; None without one."""
+        if "share" not in self._loaded:
+            self._loaded["share"] = self._read_share()
+        return self._loaded["share"]
+
+    def _read_share(self) -> dict | None:
+        from worldagent.analysis.noise import share_line
+        from worldagent.reports.results import world_share_summary
+
+        campaign = self.run.random_campaign(self.env)
+        if campaign is None:
+            return None
+        with self.run.store(self.env) as store:
+            evaluations = store.evaluations(campaign)
+        main = self.spec.metrics.main
+        summary = world_share_summary(self.spec, evaluations, [main])
+        if not summary:
+            return None
+        line = f"{campaign}, {summary['worlds']:,} worlds x {summary['repeats']} episodes: {share_line(summary, main)}"
+        return {"campaign": campaign, "line": line, "summary": summary}
 
     def failing(self, event: str | None, required: bool = True):
         """(selection, bool[n] which stored worlds it selects) of ``event`` (default: the env's failure);
@@ -208,10 +233,12 @@ class EnvSession:
         """The failing stored worlds ranked ``by`` likelihood or severity, each with its nearest passing world."""
         selection, failing = self.failing(event)
         severity = views.severity(selection, self.means)
-        ranked, repeats = views.distinct_latents(self.latents, views.rank_failures(self.latents, failing, severity, by))
+        order = views.rank_failures(self.latents, failing, severity, by)
+        ranked, repeats = views.distinct_worlds(self.world_keys(order), order)
+        distinct = len(ranked)
         ranked, repeats = ranked[:limit], repeats[:limit]
         passing = np.flatnonzero(~failing)
-        near, distance = views.nearest(self.latents[ranked], self.latents[passing], beyond=SAME_LATENT)
+        near, distance = self.nearest_other_worlds(ranked, passing)
         prior = views.log_prior(self.latents[ranked])
         rows = [
             {
@@ -221,13 +248,12 @@ class EnvSession:
                 "severity": float(severity[i]),
                 "metrics": {name: finite_or_none(self.means[name][i]) for name in selection.metrics},
                 "evaluations": int(repeats[k]),
-                "nearest_passing": int(passing[near[k]]) if near[k] >= 0 else None,
-                "nearest_metrics": {name: finite_or_none(self.means[name][passing[near[k]]]) for name in selection.metrics} if near[k] >= 0 else None,
+                "nearest_passing": int(near[k]) if near[k] >= 0 else None,
+                "nearest_metrics": {name: finite_or_none(self.means[name][near[k]]) for name in selection.metrics} if near[k] >= 0 else None,
                 "distance": finite_or_none(distance[k]),
             }
             for k, i in enumerate(ranked)
         ]
-        distinct = len(views.distinct_latents(self.latents, np.flatnonzero(failing))[0])
         return {
             "event": selection.describe(),
             "failing": int(failing.sum()),
@@ -236,6 +262,56 @@ class EnvSession:
             "by": by,
             "rows": rows,
         }
+
+    def world_keys(self, indices) -> list[str]:
+        """The identity of each stored evaluation's repaired world (``store.world_digest``, DESIGN.md "Identity"):
+        latents that repair to one world are one world. Read once and kept; a campaign that stored no worlds
+        (failure-rate estimates) is decoded through G(z), and without a generator its latent stands in."""
+        known = self._loaded.setdefault("world_keys", {})
+        wanted = list(dict.fromkeys(int(i) for i in indices if int(i) not in known))
+        if wanted:
+            known.update(self._digests(wanted))
+        return [known[int(i)] for i in indices]
+
+    def _digests(self, indices: list[int]) -> dict[int, str]:
+        from worldagent.store import world_digest
+
+        found, unstored = {}, []
+        with self.run.store(self.env) as store:
+            for i in indices:
+                e = self.evaluations[i]
+                try:
+                    found[i] = world_digest(store.world(e.campaign, e.generation, e.slot))
+                except WorldagentError:
+                    unstored.append(i)
+        if unstored and self.run.has_generator(self.env):
+            from worldagent.search.objectives import generate
+
+            with self.lock:
+                worlds = generate(self.generator()[0], self.latents[unstored])
+            for k, i in enumerate(unstored):
+                world = jax_row(worlds, k)
+                found[i] = world_digest(self.spec.world_to_arrays(world))
+        elif unstored:
+            found |= {i: "latent:" + np.round(self.latents[i], 9).tobytes().hex() for i in unstored}
+        return found
+
+    def nearest_other_worlds(self, rows: np.ndarray, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(stored index, latent distance) of the candidate nearest each of ``rows`` in z that is another repaired
+        world (``world_keys``; a latent within ``SAME_LATENT`` is the same one); (-1, inf) where none is."""
+        near, distance = np.full(len(rows), -1), np.full(len(rows), np.inf)
+        for k, i in enumerate(rows):
+            gaps = np.linalg.norm(self.latents[candidates] - self.latents[i], axis=1)
+            (own,) = self.world_keys([i])
+            order = np.argsort(gaps, kind="stable")
+            order = order[gaps[order] > SAME_LATENT]
+            for start in range(0, len(order), NEIGHBOURS_READ):  # the nearest few first: most of the time the first one is another world
+                chunk = order[start : start + NEIGHBOURS_READ]
+                other = next((j for j, key in zip(chunk, self.world_keys(candidates[chunk])) if key != own), None)
+                if other is not None:
+                    near[k], distance[k] = candidates[other], gaps[other]
+                    break
+        return near, distance
 
     def atlas_names(self) -> list[str]:
         if "atlas_names" not in self._loaded:
@@ -412,6 +488,13 @@ def run_latent_dim(run: Run, env: str, evaluations: list) -> int:
     if run.has_generator(env):
         return run.generator(env).latent_dim
     raise WorldagentError(f"{run.run_dir} has neither stored worlds nor a generator for {env}; run `worldagent reproduce --out {run.run_dir}`.")
+
+
+def jax_row(batch: Any, row: int) -> Any:
+    """Row ``row`` of a batched pytree, as numpy (unbatched)."""
+    import jax
+
+    return jax.tree_util.tree_map(lambda leaf: np.asarray(leaf[row]), batch)
 
 
 def finite_or_none(value) -> float | None:

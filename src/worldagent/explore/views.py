@@ -120,15 +120,15 @@ def rank_failures(latents: np.ndarray, failing: np.ndarray, severities: np.ndarr
     return index[np.argsort(-key, kind="stable")]
 
 
-def distinct_latents(latents: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(the first of ``order`` for each distinct latent, how many of ``order`` share it), in ``order``'s order.
+def distinct_worlds(keys: Sequence[str], order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the first of ``order`` for each distinct world, how many of ``order`` share it), in ``order``'s order;
+    ``keys[k]`` is the identity of ``order[k]``'s repaired world (``store.world_digest``).
 
-    A latent evaluated again (importance sampling draws from a pool; campaigns meet) is one world.
+    A world evaluated again (importance sampling draws from a pool; campaigns meet; latents that repair to one world) is one world.
     """
-    first: dict[bytes, int] = {}
-    counts: dict[bytes, int] = {}
-    for i in order:
-        key = np.round(np.asarray(latents[i], np.float64), 9).tobytes()
+    first: dict[str, int] = {}
+    counts: dict[str, int] = {}
+    for i, key in zip(order, keys, strict=True):
         first.setdefault(key, int(i))
         counts[key] = counts.get(key, 0) + 1
     return np.array(list(first.values()), int), np.array([counts[key] for key in first], int)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from worldagent.envs import registry
+from worldagent.reports.noise import share_note
 from worldagent.reports.page import esc, fmt
 from worldagent.reports.results import Headline
 
@@ -121,6 +122,13 @@ def one_seed_notes(results: dict) -> list[str]:
     return notes
 
 
+def share_notes(results: dict) -> dict[str, str]:
+    """{env: one line}: the world's share of each env's main metric on its random campaign (``reports.noise.share_note``)."""
+    shares = {env: (res.get("random") or {}).get("share") for env, res in results.items()}
+    notes = {env: share_note(env, share, registry.get(env).metrics.main) for env, share in shares.items() if share}
+    return {env: line for env, line in notes.items() if line}
+
+
 def departures_section(rows: list[Headline], results: dict, preset: str | None = None) -> str:
     """The report's opening box: each number that departs from the paper, its likely cause and its section; one-seed warnings."""
     found = departures(rows, results)
@@ -152,4 +160,12 @@ def departures_section(rows: list[Headline], results: dict, preset: str | None =
         else ""
     )
     notes = "".join(f"<li data-flag='one-seed'>{esc(line)}</li>" for line in one_seed_notes(results))
-    return f"<div class='departures'>{budgets}{head}{table}" + (f"<ul class='warning'>{notes}</ul>" if notes else "") + "</div>"
+    shares = "".join(f"<li data-share-env='{esc(env)}'>{esc(line)}</li>" for env, line in share_notes(results).items())
+    share_list = (
+        "<p>How much of an episode's outcome belongs to the world (the paper does not measure it; "
+        "<a href='#random'>random evaluation</a>):</p>"
+        f"<ul class='share'>{shares}</ul>"
+        if shares
+        else ""
+    )
+    return f"<div class='departures'>{budgets}{head}{table}" + (f"<ul class='warning'>{notes}</ul>" if notes else "") + share_list + "</div>"

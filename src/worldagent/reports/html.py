@@ -25,6 +25,7 @@ from worldagent.files import write_text
 from worldagent.reports.curriculum import curriculum_section
 from worldagent.reports.departures import departures_section, differs, seeds_of
 from worldagent.reports.influence import training_regime
+from worldagent.reports.noise import share_paragraph
 from worldagent.reports.page import CSS, esc, fmt, image, missing, number, phase_state, section, table
 from worldagent.reports.provenance import overview
 from worldagent.reports.results import Headline, env_results, headlines
@@ -169,8 +170,10 @@ def random_section(run_dir: Path, results: dict) -> str:
             res["layout"].figure("random"),
             f"{env}: reward over {random['worlds']} random worlds",
         )
-        return table(["", "value"], rows, raw_cells=True) + image(
-            figure, f"{env}: distribution of the normalised reward over random worlds (cf. Figure 6a)"
+        return (
+            table(["", "value"], rows, raw_cells=True)
+            + share_paragraph(random.get("share", {}), res["metric"])
+            + image(figure, f"{env}: distribution of the normalised reward over random worlds (cf. Figure 6a)")
         )
 
     return per_env(results, "random", render, "random", "no random campaign in the store")

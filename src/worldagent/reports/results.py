@@ -92,8 +92,29 @@ def env_results(run: Run, env: str) -> dict:
     return results
 
 
+def played_failure(spec, evaluations):
+    """The env's failure event (``spec.failure``) parsed, when every evaluation played its metrics; else None."""
+    from worldagent.events import parse_selection
+
+    if not spec.failure or not evaluations:
+        return None
+    selection = parse_selection(spec.failure, spec.name)
+    played = all(any(m in e for e in ev.episodes) for ev in evaluations for m in selection.metrics)
+    return selection if played else None
+
+
+def world_share_summary(spec, evaluations, metrics=()) -> dict:
+    """The world's share (``analysis.noise.noise_summary``, strict JSON: NaN as null) of ``metrics`` and the env's
+    main metric, and of its failure event where played; {} when the worlds hold fewer than 2 episodes each."""
+    from worldagent.analysis.noise import noise_summary
+    from worldagent.influence.statistics import json_safe
+
+    names = [m for m in dict.fromkeys([*metrics, spec.metrics.main]) if m]
+    return json_safe(noise_summary(evaluations, names, played_failure(spec, evaluations)))
+
+
 def random_results(spec, evaluations, campaign: str, scale: Scale) -> dict:
-    """Means over the random worlds: raw, normalised and each highlighted metric."""
+    """Means over the random worlds: raw, normalised and each highlighted metric; the world's share (``world_share_summary``)."""
     normalised = normalised_means(spec, evaluations, scale)
     return {
         "campaign": campaign,
@@ -103,6 +124,7 @@ def random_results(spec, evaluations, campaign: str, scale: Scale) -> dict:
         "mean_raw": float(np.nanmean([e.score for e in evaluations])),
         "mean_normalised": float(np.nanmean(normalised)),
         **{name: float(np.nanmean(world_means(evaluations, name))) for name in spec.metrics.highlighted},
+        "share": world_share_summary(spec, evaluations),
     }
 
 

@@ -250,20 +250,26 @@ def training_worlds(ctx: EnvContext) -> tuple[Any, str]:
 
 
 def random_phase(ctx: EnvContext) -> dict:
-    """Evaluate the agents on random worlds z ~ N(0, I) (paper §6.1.1, Figure 6a)."""
+    """Evaluate the agents on random worlds z ~ N(0, I) (paper §6.1.1, Figure 6a), and the world's share of the outcome."""
     from worldagent import experiments
+    from worldagent.analysis.noise import share_line
+    from worldagent.reports.results import world_share_summary
 
     with ctx.store() as store:
         evaluations = experiments.random_evaluation(
             store, ctx.setup(), ctx.metric, worlds=ctx.budgets.random_worlds, seed=ctx.seed, progress=ctx.progress, resume=True
         )
     scores = np.array([e.score for e in evaluations])
+    share = world_share_summary(ctx.spec, evaluations, [ctx.metric])  # the world's share, from the episodes just stored
+    said = share_line(share, ctx.metric)
     return {
         "store": ctx.layout.rel(ctx.layout.store_path),
         "campaign": experiments.campaign_names(ctx.metric, ctx.seed)["random"],
         "worlds": len(scores),
         "mean": float(np.nanmean(scores)),
-        "summary": f"{len(scores):,} worlds x {ctx.preset.repeats} episodes; mean {ctx.metric} {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})",
+        "share": share,
+        "summary": f"{len(scores):,} worlds x {ctx.preset.repeats} episodes; mean {ctx.metric} {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g})"
+        + (f"; {said}" if said else ""),
     }
 
 

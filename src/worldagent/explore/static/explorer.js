@@ -93,7 +93,7 @@ async function selectEnv(name) {
   state.map = map;
   campaignLegend();
   drawMap();
-  status(`${name}: ${info.worlds} stored worlds`);
+  status(`${name}: ${info.worlds} stored evaluations`);
 }
 
 // -- map ----------------------------------------------------------------------------------
@@ -140,7 +140,15 @@ function drawMap() {
   canvas.dataset.metric = state.metric;
   canvas.dataset.scale = scale.kind;
   failingLegend();
+  shareLegend();
   drawMarker(ctx, place);
+}
+
+function shareLegend() {
+  // the world's share of an episode's outcome, from the stored random campaign (nothing without one)
+  const el = $("map-share"), share = state.map.share;
+  el.hidden = !share;
+  el.innerHTML = share ? `<div class="row" title="one-way random-effects ICC (95% interval); docs/noise.md says how to read it">${esc(share.line)}</div>` : "";
 }
 
 function drawMapAxes(ctx, place) {
@@ -281,11 +289,11 @@ async function loadFailures() {
   try {
     const found = await api(`/api/${state.env}/failures?${query}`);
     if (!fresh()) return;
-    $("failures-summary").textContent = `${found.failing} of ${found.worlds} stored evaluations fail (${found.event}): ${found.distinct} distinct worlds, ranked by ${found.by}`;
+    $("failures-summary").textContent = `${found.failing} of ${found.worlds} stored evaluations fail (${found.event}): ${found.distinct} distinct worlds (repaired worlds, not latents), ranked by ${found.by}`;
     const metricNames = found.rows.length ? Object.keys(found.rows[0].metrics) : [];
     const picture = (i) => `<img loading="lazy" data-world="${i}" src="/api/${state.env}/world/${i}.png?size=72" alt="world ${i}"> ${i}`;
     table.innerHTML = `<tr><th>#</th><th>failing world</th><th title="log N(z; 0, I): higher is likelier under the generator's prior">log p(z)</th>` +
-      `<th title="how far its means lie past the event's thresholds, in the metrics' units">severity (past the threshold)</th><th>times evaluated</th>` +
+      `<th title="how far its means lie past the event's thresholds, in the metrics' units">severity (past the threshold)</th><th title="failing evaluations of this repaired world (latents that repair to one world count once)">failing evaluations</th>` +
       metricNames.map((m) => `<th>${esc(m)}</th>`).join("") + `<th>nearest passing world</th>` + metricNames.map((m) => `<th>${esc(m)} there</th>`).join("") + `<th>latent distance</th></tr>` +
       found.rows.map((row, k) => `<tr><td class="num">${k + 1}</td><td>${picture(row.index)}</td>` +
         `<td class="num">${fmt(row.log_prior)}</td><td class="num">${fmt(row.severity)}</td><td class="num">${row.evaluations}</td>` +

@@ -60,7 +60,14 @@ def world_rates(worlds: Sequence[ConfirmedWorld], event: Selection, fresh: bool)
     """The share of a world's (fresh, or found) episodes on which ``event`` holds, averaged over ``worlds``
     with a 95% interval over worlds (episodes of one world are not independent draws of the selection's rate)."""
     rates = [world.failure_rate(event, confirmed=fresh).mean for world in worlds]
-    return {**mean_interval(rates).as_dict(), "worlds": len(rates), "episodes_per_world": worlds[0].repeats if fresh and worlds else None}
+    interval = mean_interval(rates)  # a rate's interval clipped to [0, 1], where a t interval over few worlds may reach past it
+    return {
+        "mean": interval.mean,
+        "low": max(interval.low, 0.0),
+        "high": min(interval.high, 1.0),
+        "worlds": len(rates),
+        "episodes_per_world": worlds[0].repeats if fresh and worlds else None,
+    }
 
 
 def event_rates(confirmed: Sequence[ConfirmedWorld], kept: Sequence[ConfirmedWorld], event: Selection) -> dict:

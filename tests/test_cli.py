@@ -102,7 +102,14 @@ def test_dataset_and_generator_commands_end_to_end(tmp_path):
     again = runner.invoke(app, args + ["--repair", "apples=30"])  # finished run: trains nothing more, rebuilds the repair
     assert again.exit_code == 0, again.output
     assert f"reused the VAE already trained in {gen} (2 epochs); only the repair was rebuilt" in again.output.replace("\n", "")
-    assert "apples=30" in again.output and json.loads((gen / "vae.json").read_text())["history"] == quality_history
+    assert "apples=30" in again.output and "apples=30 (default)" not in again.output
+    assert json.loads((gen / "vae.json").read_text())["history"] == quality_history
+    # without --epochs, the VAE in --out is reused as trained (not resumed to the paper preset's 100 epochs)
+    unset = [arg for arg in args if arg not in ("--epochs", "2")] + ["--repair", "apples=31"]
+    third = runner.invoke(app, unset)
+    assert third.exit_code == 0, third.output
+    assert "reused the VAE already trained" in third.output.replace("\n", "")
+    assert json.loads((gen / "vae.json").read_text())["history"] == quality_history
 
 
 def test_generator_commands_refuse_bad_input_in_one_line(tmp_path):

@@ -75,6 +75,8 @@ def test_a_repair_that_drops_the_walls_is_called_narrow(default_scatter, scatter
         _, measured, warnings = measure(build_generator(vae, scatter_data, {"walls": "threshold"}), scatter_data, small_vae)
     assert measured["structure"]["wall_count"]["generator"] < 1 and measured["structure"]["wall_count"]["spread_ratio"] < 0.5
     assert any(line.startswith("narrow: wall_count") and "repair that keeps the decoded wall_count" in line for line in warnings)
+    assert measured["structure"]["wall_count"]["ks_distance"] > 0.8  # mazes of under one wall against the dataset's many
+    assert any(line.startswith("shifted: wall_count") and "repair's settings" in line for line in warnings)
     assert not any(line.startswith("collapsed:") for line in warnings)  # the VAE is fine; the repair is not
 
 
@@ -103,7 +105,14 @@ def test_sensitivity_is_zero_for_a_decoder_that_ignores_z(default_scatter, scatt
 def healthy() -> tuple[dict, dict]:
     """Hand-made figures of a generator no threshold flags."""
     recon = {"vae": {"nll_per_world": 40.0}, "mean_image": {"nll_per_world": 50.0}}
-    row = {"spread_ratio": 0.9, "generator_spread": {"std": 0.9, "p5": 0.0, "p95": 3.0}, "dataset_spread": {"std": 1.0, "p5": 0.0, "p95": 3.0}}
+    row = {
+        "generator": 1.4,
+        "dataset": 1.5,
+        "ks_distance": 0.1,
+        "spread_ratio": 0.9,
+        "generator_spread": {"std": 0.9, "p5": 0.0, "p95": 3.0},
+        "dataset_spread": {"std": 1.0, "p5": 0.0, "p95": 3.0},
+    }
     measured = {
         "latent": {"active_units": 5, "kl_total": 4.0, "kl_per_dim": [0.8] * 5},
         "sensitivity": {"mean_changed_world_share": 0.7},
@@ -127,6 +136,7 @@ def healthy() -> tuple[dict, dict]:
             lambda r, m: m["structure"]["walls"].update(spread_ratio=0.0, generator_spread={"std": 0.0, "p5": 0.0, "p95": 0.0}),
             "narrow: walls is constant",
         ),
+        (lambda r, m: m["structure"]["walls"].update(ks_distance=0.93, generator=0.48), "shifted: walls under G(z) is distributed unlike"),
     ],
 )
 def test_each_warning_fires_on_its_own_symptom(change, starts):

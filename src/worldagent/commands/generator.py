@@ -67,6 +67,14 @@ def trained_epochs(directory: Path) -> int:
         return 0
 
 
+def planned_epochs(directory: Path) -> int:
+    """The epochs the VAE checkpoint in ``directory`` was started with (a killed one resumes to them; 0: none)."""
+    try:
+        return int(json.loads((Path(directory) / "vae.json").read_text())["config"]["epochs"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0
+
+
 def quality_figures(directory: Path, samples: int, seed: int) -> dict:
     """Reconstruction, and the spec-driven figures of ``worlds.quality.figures``, of a saved generator."""
     import jax
@@ -133,7 +141,12 @@ def register(app: typer.Typer) -> None:
         dataset_path: Path = typer.Option(None, "--dataset", help="Dataset file; default: OUT/dataset.npz, made if missing."),
         n: int = typer.Option(10_000, "--n", help=f"Worlds in a dataset made here (at most {DATASET_CAP:,})."),
         seed: int = typer.Option(0, "--seed", help="First generator seed of a dataset made here."),
-        epochs: int = typer.Option(None, "--epochs", help="Training epochs (default: the env's paper preset, e.g. racing 25, harvest 100)."),
+        epochs: int = typer.Option(
+            None,
+            "--epochs",
+            help="Training epochs (default: those of a VAE already trained in --out, reused as it is; else the env's paper preset, "
+            "e.g. racing 25, harvest 100).",
+        ),
         beta: float = typer.Option(1.0, "--beta", help="Weight of the KL term of the ELBO."),
         latent: int = typer.Option(10, "--latent", help="Latent dimensions (the paper: 10)."),
         learning_rate: float = typer.Option(1e-3, "--lr", help="Adam step size."),
@@ -158,8 +171,8 @@ def register(app: typer.Typer) -> None:
         registry.get(env)  # an unknown environment fails before anything is written
         repair_name, settings = repair_settings(repair)
         registry.get(env).repair_factory(repair_name)  # an unknown repair fails before anything is written
-        if epochs is None:
-            epochs = registry.get(env).presets.get("paper", {}).get("vae_epochs", VAEConfig.epochs)
+        if epochs is None:  # a VAE already trained in --out is reused as it is (a new repair needs no training)
+            epochs = planned_epochs(out) or registry.get(env).presets.get("paper", {}).get("vae_epochs", VAEConfig.epochs)
         config = VAEConfig(latent_dim=latent, beta=beta, learning_rate=learning_rate, batch_size=batch_size, epochs=epochs)
         config = config if free_bits is None else replace(config, free_bits=free_bits)
         config.validate()
@@ -169,7 +182,9 @@ def register(app: typer.Typer) -> None:
         epochs_before = trained_epochs(out)
         vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet, repair_name=repair_name)
         last = vae.history[-1]
-        repair_note = (repair_name or registry.get(env).default_repair) + "".join(f", {name}={value}" for name, value in used.items())
+        repair_note = (repair_name or registry.get(env).default_repair) + "".join(
+            f", {name}={value}" + ("" if name in settings else " (default)") for name, value in used.items()
+        )
         if epochs_before >= len(vae.history):  # a finished VAE is reused as it is (a new repair costs no training)
             console.print(f"reused the VAE already trained in {out} ({epochs_before} epochs); only the repair was rebuilt (another --out retrains)")
         console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}; repair: {repair_note}")

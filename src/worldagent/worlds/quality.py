@@ -29,6 +29,7 @@ from collections import Counter
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy import stats
 
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
@@ -243,8 +244,9 @@ def structure(spec, generated, count: int, dataset: WorldDataset) -> dict:
 
     Returns:
         ``{name: {"generator": mean, "dataset": mean, "relative_difference": (g - d) / d or None,
-        "generator_spread": spread, "dataset_spread": spread, "spread_ratio": g std / d std or None}}``
-        (``spread``: std, p5, p95; the ratio is None when the dataset's std is 0).
+        "generator_spread": spread, "dataset_spread": spread, "spread_ratio": g std / d std or None,
+        "ks_distance": the largest gap between the two empirical CDFs}}`` (``spread``: std, p5, p95; the ratio is None
+        when the dataset's std is 0).
     """
     count = min(count, STRUCTURE_WORLDS)
     reference = min(len(dataset), STRUCTURE_WORLDS)
@@ -261,6 +263,7 @@ def structure(spec, generated, count: int, dataset: WorldDataset) -> dict:
             "generator_spread": ours_spread,
             "dataset_spread": theirs_spread,
             "spread_ratio": ours_spread["std"] / theirs_spread["std"] if theirs_spread["std"] > 0 else None,
+            "ks_distance": float(stats.ks_2samp(ours, theirs).statistic),
         }
     return out
 
@@ -318,6 +321,10 @@ MIN_NLL_GAIN = 0.01  # held-out NLL within 1% of the mean world's: the decoder i
 MIN_CHANGED_WORLD_SHARE = 0.05  # a one-standard-deviation move changes fewer than 1 world in 20
 MIN_DISTINCT_SHARE = 0.1  # fewer distinct decodes than 1 in 10 of min(samples, dataset worlds)
 MIN_SPREAD_RATIO = 0.5  # a descriptor's std under G(z) below half the dataset's: its tails are out of search's reach
+# A descriptor whose distribution under G(z) is shifted: at some value, the shares of decoded and dataset worlds
+# below it differ by more than half (two-sample Kolmogorov-Smirnov distance). A spread can match while the mean is
+# elsewhere (mazes of 0.5 walls against the dataset's 23); this flags gross shifts only.
+MAX_KS_DISTANCE = 0.5
 RETRAIN = "retrain with a larger --free-bits (e.g. 1.0), a smaller --beta or more worlds"
 
 
@@ -368,6 +375,21 @@ def _narrow(structure: dict) -> list[str]:
     return out
 
 
+def _shifted(structure: dict) -> list[str]:
+    out = []
+    for name, row in structure.items():
+        distance = row.get("ks_distance")
+        if distance is None or distance <= MAX_KS_DISTANCE:
+            continue
+        ours, theirs = row["generator_spread"], row["dataset_spread"]
+        out.append(
+            f"shifted: {name} under G(z) is distributed unlike the dataset's (mean {row['generator']:.3g} vs {row['dataset']:.3g}, "
+            f"5-95% {ours['p5']:.3g}-{ours['p95']:.3g} vs {theirs['p5']:.3g}-{theirs['p95']:.3g}, KS distance {distance:.2f}): "
+            "searches explore other worlds than the env makes — check the repair's settings, or retrain (more --epochs, a larger --free-bits)."
+        )
+    return out
+
+
 def diagnose(reconstruction: dict, figures: dict, worlds: int, training_nll: float | None = None) -> list[str]:
     """One-line warnings, each naming its fix, for a generator search cannot use (empty: none).
 
@@ -377,7 +399,8 @@ def diagnose(reconstruction: dict, figures: dict, worlds: int, training_nll: flo
     (training NLL under ``OVERFIT_RATIO`` of the held-out); underfit: neither decodes well yet. Inert: a ±1 move
     along z changes under ``MIN_CHANGED_WORLD_SHARE`` of worlds, or the draws hold under
     ``MIN_DISTINCT_SHARE`` distinct worlds. Narrow: a descriptor whose std under G(z) is below
-    ``MIN_SPREAD_RATIO`` of the dataset's.
+    ``MIN_SPREAD_RATIO`` of the dataset's. Shifted: a descriptor whose distribution under G(z) is more than
+    ``MAX_KS_DISTANCE`` (Kolmogorov-Smirnov) from the dataset's.
 
     Args:
         reconstruction: ``reconstruction``'s figures.
@@ -385,4 +408,5 @@ def diagnose(reconstruction: dict, figures: dict, worlds: int, training_nll: flo
         worlds: the dataset's size (caps how many distinct worlds a nearest-world repair can give).
         training_nll: the last epoch's NLL per training world (tells overfit from underfit), if known.
     """
-    return _collapse(reconstruction, figures["latent"], training_nll) + _inert(figures, worlds) + _narrow(figures["structure"])
+    structure = figures["structure"]
+    return _collapse(reconstruction, figures["latent"], training_nll) + _inert(figures, worlds) + _narrow(structure) + _shifted(structure)

@@ -97,3 +97,175 @@ def test_a_batch_fits_the_kernel_once_and_the_liar_refits_only_the_posterior():
     opt.ask(4)
     assert [o for o, _ in fits] == ["fmin_l_bfgs_b", None, None, None, None]
     assert [n for _, n in fits] == [8, 8, 9, 10, 11]  # the liar's dummies join one by one
+
+
+# -- searches that survive noise (issue 50) -------------------------------------------------------
+
+SMALL = OptimiserConfig(popsize=8, bo_batch=3, initial_points=4, bo_candidates=500, bo_starts=1, bo_gp_restarts=1)
+
+
+def noisy(z, rng, sd=3.0):
+    return sphere(z) + rng.normal(0, sd, len(z))
+
+
+@pytest.mark.parametrize("name, fresh", [("cmaes-re", 5), ("bo-noise", 3)])
+def test_noise_aware_searches_keep_the_ask_tell_contract(name, fresh):
+    opt = make_optimiser(name, 10, False, 0, SMALL)
+    assert opt.whole_generations and opt.batch_size == fresh + opt.reevaluations
+    with pytest.raises(WorldagentError, match="whole generation"):
+        opt.ask(opt.batch_size - 1)
+    z = opt.ask(opt.batch_size)
+    with pytest.raises(WorldagentError, match="tell"):
+        opt.ask(opt.batch_size)  # the last generation is not told yet
+    with pytest.raises(WorldagentError, match="exactly the generation"):
+        opt.tell(z + 1.0, sphere(z))
+    scores = sphere(z)
+    scores[0] = np.nan
+    with pytest.raises(WorldagentError, match="NaN or infinite"):
+        opt.tell(z, scores)
+    opt.tell(z, sphere(z))
+    assert opt.ask(opt.batch_size).shape == (opt.batch_size, 10)
+
+
+@pytest.mark.parametrize("name, maximize", [("cmaes-re", False), ("bo-noise", True)])
+def test_each_generation_re_asks_the_incumbents_by_their_pooled_means(name, maximize):
+    opt = make_optimiser(name, 10, maximize, 1, SMALL)
+    rng, seen = np.random.default_rng(0), {}
+    for _ in range(4):
+        z = opt.ask(opt.batch_size)
+        again = z[-opt.reevaluations :]
+        if seen:  # the best pooled means so far, exactly the latents asked before
+            pooled = {k: np.mean(v) for k, v in seen.items()}
+            ranked = sorted(pooled, key=lambda k: -pooled[k] if maximize else pooled[k])[: opt.reevaluations]
+            assert [a.tobytes() for a in again] == ranked
+        scores = noisy(z, rng)
+        opt.tell(z, scores)
+        for latent, score in zip(z, scores):
+            seen.setdefault(latent.tobytes(), []).append(score)
+    latent, mean, count = opt.incumbent()
+    assert count == len(seen[latent.tobytes()]) and mean == pytest.approx(np.mean(seen[latent.tobytes()]))
+    assert max(len(v) for v in seen.values()) >= 3  # an incumbent that stayed was asked generation after generation
+
+
+def test_cmaes_is_told_its_own_samples_and_the_gp_learns_a_noise_level():
+    opt = make_optimiser("cmaes-re", 10, False, 0, SMALL)
+    told = []
+    tell = opt.base.es.tell
+    opt.base.es.tell = lambda X, f: told.append(len(X)) or tell(X, f)
+    for _ in range(2):
+        z = opt.ask(opt.batch_size)
+        opt.tell(z, sphere(z))
+    assert told == [opt.base.batch_size] * 2
+    levels = {}
+    for sd in (0.0, 20.0):
+        bo = make_optimiser("bo-noise", 10, False, 0, SMALL)
+        rng = np.random.default_rng(0)
+        for _ in range(6):
+            z = bo.ask(bo.batch_size)
+            bo.tell(z, noisy(z, rng, sd))
+        levels[sd] = bo.base.noise_level
+    assert levels[20.0] > 10 * levels[0.0]  # in units of the scores' variance: mostly noise, against almost none
+
+
+def evaluation(generation, slot, latent, score, episodes=8):
+    from worldagent.store import Evaluation
+
+    return Evaluation("c", generation, slot, np.asarray(latent, np.float64), score, [{"x": score}] * episodes, 0.0, 0.0)
+
+
+def test_the_reported_world_is_the_best_pooled_mean_among_re_evaluated_latents():
+    from worldagent.search.campaign import best_evaluation
+    from worldagent.search.optimisers import reported_evaluation
+
+    lucky, steady, other = [0.0, 1.0], [2.0, 0.0], [3.0, 3.0]
+    found = [evaluation(0, 0, lucky, -9.0), evaluation(0, 1, steady, -5.0), evaluation(0, 2, other, -1.0), evaluation(1, 0, steady, -3.0)]
+    found += [evaluation(1, 1, lucky, 3.0), evaluation(1, 2, [5.0, 5.0], -20.0)]  # a newcomer, evaluated once
+    pick = reported_evaluation(found, maximize=False)
+    assert (pick.generation, pick.slot) == (0, 1) and pick.score == pytest.approx(-4.0) and len(pick.episodes) == 16
+    assert reported_evaluation(found, maximize=True).score == pytest.approx(-3.0)  # lucky's -9 and 3, among the re-evaluated
+    single = [evaluation(0, i, [float(i), 0.0], s) for i, s in enumerate([2.0, -1.0, -1.0, 4.0])]
+    assert reported_evaluation(single, False) == best_evaluation(single, False)  # no re-evaluation: today's pick
+    assert reported_evaluation([evaluation(0, 0, [0.0, 0.0], np.nan)], False) is None
+
+
+@pytest.mark.parametrize("optimiser, budget", [("cmaes-re", 30), ("bo-noise", 14)])
+def test_a_killed_noise_aware_campaign_resumes_to_exactly_the_uninterrupted_run(tmp_path, optimiser, budget):
+    from worldagent.search.campaign import CampaignSpec, Outcome, run_campaign
+    from worldagent.store import RunStore
+
+    def evaluate(z, seeds, left=[None]):  # noqa: B006  (the call count, kept across calls)
+        if left[0] == 0:
+            raise KeyboardInterrupt
+        left[0] = None if left[0] is None else left[0] - 1
+        return [Outcome(float(sphere(latent[None])[0] + np.random.default_rng(s).normal(0, 3)), [{"cost": 0.0}]) for latent, s in zip(z, seeds)]
+
+    spec = CampaignSpec("c", "racing", "cost", False, optimiser, budget, 3, 10, SMALL, chunk=1)
+    with RunStore(tmp_path / "a") as store:
+        straight = run_campaign(store, spec, evaluate, progress=False)
+    with RunStore(tmp_path / "b") as store:
+        evaluate.__defaults__[0][0] = 9
+        with pytest.raises(KeyboardInterrupt):
+            run_campaign(store, spec, evaluate, progress=False)
+        evaluate.__defaults__[0][0] = None
+        resumed = run_campaign(store, spec, evaluate, resume=True, progress=False)
+    rows = lambda found: [(e.generation, e.slot, e.latent.tobytes(), e.score) for e in found]  # noqa: E731
+    assert rows(resumed) == rows(straight) and len({e.latent.tobytes() for e in straight}) < len(straight)  # it re-asked
+
+
+# -- atlases with re-evaluated elites ---------------------------------------------------------------
+
+
+def two_descriptors(z):
+    return np.asarray(z, np.float64)[:, :2]
+
+
+def qd(kind, **kw):
+    from worldagent.search.atlas import AdaptiveQD, CorrectedQD, Grid, QDConfig
+
+    grid = Grid(("a", "b"), (4, 4), ((-2.0, 2.0), (-2.0, 2.0)))
+    if kind == "corrected":
+        return CorrectedQD(10, False, 0, grid, two_descriptors, QDConfig(emitters=2, batch=4), **kw)
+    return AdaptiveQD(10, False, 0, grid, two_descriptors, QDConfig(emitters=2, batch=4))
+
+
+def test_the_corrected_atlas_re_asks_its_best_elites_after_the_search():
+    opt = qd("corrected", search_generations=2)
+    rng = np.random.default_rng(0)
+    for generation in range(4):
+        z = opt.ask(opt.batch_size)
+        if generation >= 2:
+            elites = opt.elites()
+            best = sorted(elites.values(), key=lambda row: row[1])[: opt.batch_size]
+            np.testing.assert_array_equal(z[: len(best)], [row[0] for row in best])
+        opt.tell(z, noisy(z, rng))
+    rows = opt.elites()
+    assert rows and all(latent.tobytes() in opt.pooled.latents for latent, _, _ in rows.values())
+    assert max(count for _, _, count in rows.values()) >= 2  # the corrected ones carry their re-evaluations
+
+
+def test_adaptive_sampling_lets_a_challenger_in_only_on_its_pooled_mean():
+    from worldagent.search.atlas import CHALLENGE_EVALUATIONS
+
+    opt = qd("adaptive")
+    rng = np.random.default_rng(1)
+    for _ in range(6):
+        z = opt.ask(opt.batch_size)
+        assert len(z) == 8 + 3
+        waiting = [opt.pooled.latents[key] for _, key in opt.challengers[:3]]
+        np.testing.assert_array_equal(z[8 : 8 + len(waiting)], np.reshape(waiting, (-1, 10)))  # challengers re-asked first
+        opt.tell(z, noisy(z, rng))
+        for cell, key in opt.challengers:
+            assert opt.mean(key) < opt.mean(opt.cells[cell])  # still beating its elite, waiting for evaluations
+            assert opt.pooled.counts[key] < min(CHALLENGE_EVALUATIONS, opt.pooled.counts[opt.cells[cell]])
+    # by hand: an elite of 3 evaluations (mean 0); a challenger at -1 waits, then takes the cell at 3 evaluations
+    fresh = qd("adaptive")
+    elite, challenger, fluke = (np.full((1, 10), v) for v in (0.1, 0.2, 0.3))
+    fresh.pooled.add(np.repeat(elite, 3, axis=0), np.array([0.0, 1.0, -1.0]))
+    fresh.cells = {0: elite.tobytes()}
+    fresh.pooled.add(np.vstack([challenger, fluke]), np.array([-1.0, -2.0]))
+    fresh.challengers = [(0, challenger.tobytes()), (0, fluke.tobytes())]
+    fresh.settle()
+    assert fresh.cells[0] == elite.tobytes() and len(fresh.challengers) == 2
+    fresh.pooled.add(np.vstack([challenger, challenger, fluke]), np.array([0.0, -0.5, 4.0]))  # -0.5 over 3; the fluke: +1
+    fresh.settle()
+    assert fresh.cells[0] == challenger.tobytes() and fresh.challengers == []

@@ -18,17 +18,38 @@ by replaying its stored evaluations into a fresh optimiser (see ``campaign.py``)
   cost grows as O(evaluations³): budgets of a few hundred, as in the paper's comparison (a
   suggestion at 210 observations: ~0.11 s of CPU, ``benchmarks/bo_suggestion.py``).
 - ``random``: z ~ N(0, I), the baseline.
+
+Noise-aware searches (issue 50): a world's score is the mean of a few episodes, so the best score a search
+saw is partly luck (the winner's curse). These re-ask latents they have already evaluated (a re-evaluation
+is a new evaluation: its own (generation, slot) and episode seed) and report the latent with the best mean
+over all its evaluations (``reported_evaluation``):
+
+- ``cmaes-re``: CMA-ES with re-evaluation of the incumbents (``Reevaluating``): each generation of 21 is 18
+  CMA-ES samples and the 3 latents with the best pooled means so far, asked again; CMA-ES is told its own
+  samples' scores. (pycma's ``NoiseHandler``, Hansen et al. 2009, evaluates its re-samples itself by calling
+  the objective and draws from numpy's global random state, so it does not fit an ask/tell campaign that
+  must replay identically.)
+- ``bo-noise``: BO whose GP has a learned noise level (a ``WhiteKernel`` fitted with the Matern kernel) and
+  whose expected improvement is measured from the best posterior mean at the observed latents instead of
+  the luckiest observation; each round of 4 suggestions also re-asks the incumbent.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from dataclasses import replace as dataclasses_replace
+from typing import Any
 
 import numpy as np
 
 from worldagent.errors import WorldagentError
 
 OPTIMISERS = ("cmaes", "bo", "random")
+NOISE_AWARE = ("cmaes-re", "bo-noise")  # searches that re-evaluate (see the module docstring)
+CMAES_REEVALUATIONS = 3  # incumbents re-asked per CMA-ES generation (of the 21: 18 samples + 3)
+BO_REEVALUATIONS = 1  # incumbents re-asked per BO round (4 suggestions + 1)
+NOISE_LEVEL = (0.5, (1e-4, 10.0))  # the WhiteKernel's start and bounds, in units of the normalised scores' variance
 
 
 @dataclass(frozen=True)
@@ -163,6 +184,7 @@ class BayesOpt(Optimiser):
     """
 
     name = "bo"
+    plug_in = False  # measure improvement from the best posterior mean (``NoisyBayesOpt``)
 
     def __init__(self, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()):
         super().__init__(dim, maximize, seed)
@@ -172,9 +194,24 @@ class BayesOpt(Optimiser):
             raise WorldagentError("Bayesian optimisation needs a box: pass a positive bound.")
         self.keys = [f"z{i:02d}" for i in range(dim)]  # zero-padded: the library sorts keys
 
+        plug_in = self.plug_in
+
         class EI(acquisition.ExpectedImprovement):
+            incumbent: float | None = None
+
             def _smart_minimize(self, acq, space, x_seeds, random_state):
                 return minimise_from(acq, x_seeds, space.bounds)
+
+            def suggest(self, gp, target_space, n_random=10_000, n_smart=10, fit_gp=True, random_state=None):
+                # the liar has fitted ``gp`` to the observations and its dummies: improvement over the best
+                # posterior mean there, not over the luckiest noisy observation (plug-in EI)
+                self.incumbent = float(np.max(gp.predict(target_space.params))) if plug_in else None
+                return super().suggest(gp, target_space, n_random, n_smart, fit_gp, random_state)
+
+            def base_acq(self, mean, std):
+                if self.incumbent is not None:
+                    self.y_max = self.incumbent
+                return super().base_acq(mean, std)
 
         class Liar(acquisition.ConstantLiar):
             """The constant liar with our budget for maximising the acquisition."""
@@ -228,9 +265,13 @@ class BayesOpt(Optimiser):
         gp.kernel, gp.optimizer = gp.kernel_, None  # the next fit starts here; the liar's refits keep it
 
     def tell(self, z, scores) -> None:
+        import contextlib
+        import io
+
         z, scores = self._checked(z, scores)
-        for point, score in zip(z, -self._minimised(scores)):  # the library maximises
-            self.bo.register(params=dict(zip(self.keys, point)), target=float(score))
+        with contextlib.redirect_stdout(io.StringIO()):  # the library prints a line for each repeated latent
+            for point, score in zip(z, -self._minimised(scores)):  # the library maximises
+                self.bo.register(params=dict(zip(self.keys, point)), target=float(score))
 
 
 def minimise_from(acq, starts: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, float]:
@@ -285,9 +326,156 @@ class RandomSearch(Optimiser):
 RANDOM_STREAM = 1  # RandomSearch's rng is default_rng([seed, RANDOM_STREAM])
 
 
+class NoisyBayesOpt(BayesOpt):
+    """BO with a learned noise level: the GP's kernel is Matern + ``WhiteKernel``, both fitted to the
+    observations (a world's score is a mean of a few episodes, not a noiseless value), and expected improvement
+    is measured from the best posterior mean at the observed latents (plug-in EI)."""
+
+    name = "bo-noise"
+    plug_in = True
+
+    def __init__(self, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()):
+        super().__init__(dim, maximize, seed, config)
+        from sklearn.gaussian_process.kernels import Matern, WhiteKernel
+
+        level, bounds = NOISE_LEVEL
+        self.bo.set_gp_params(kernel=Matern(nu=2.5) + WhiteKernel(noise_level=level, noise_level_bounds=bounds))
+
+    @property
+    def noise_level(self) -> float:
+        """The fitted noise variance, in units of the normalised scores' variance (NaN before the first fit)."""
+        kernel = getattr(self.bo._gp, "kernel_", None)
+        return float(kernel.k2.noise_level) if kernel is not None else float("nan")
+
+
+def latent_key(z: np.ndarray) -> bytes:
+    """A latent's identity for pooling: its float64 bytes (a re-asked latent is the very same array)."""
+    return np.ascontiguousarray(z, np.float64).tobytes()
+
+
+class Pooled:
+    """Every latent's evaluations so far, pooled: the sum and count of its scores ("lower is better")."""
+
+    def __init__(self, dim: int):
+        self.dim = dim
+        self.latents: dict[bytes, np.ndarray] = {}  # in order of first evaluation
+        self.sums: dict[bytes, float] = {}
+        self.counts: dict[bytes, int] = {}
+
+    def add(self, z: np.ndarray, minimised: np.ndarray) -> None:
+        for latent, score in zip(z, minimised):
+            key = latent_key(latent)
+            self.latents.setdefault(key, np.array(latent, np.float64))
+            self.sums[key] = self.sums.get(key, 0.0) + float(score)
+            self.counts[key] = self.counts.get(key, 0) + 1
+
+    def best(self, count: int) -> np.ndarray:
+        """f64[<=count, dim]: the latents with the lowest pooled means, the earliest first on ties."""
+        keys = list(self.latents)
+        means = np.array([self.sums[k] / self.counts[k] for k in keys])
+        order = np.argsort(means, kind="stable")[:count]
+        return np.array([self.latents[keys[i]] for i in order], np.float64).reshape(-1, self.dim)
+
+    def count(self, z: np.ndarray) -> int:
+        return self.counts.get(latent_key(z), 0)
+
+    def mean(self, z: np.ndarray) -> float:
+        key = latent_key(z)
+        return self.sums[key] / self.counts[key] if key in self.counts else float("nan")
+
+
+class Reevaluating(Optimiser):
+    """Another optimiser's rounds, each followed by ``reevaluations`` incumbents asked again.
+
+    A generation is the base optimiser's round and then the ``reevaluations`` latents with the best pooled means
+    so far (before anything is scored: the round's own first latents), so a world that scored well by luck is
+    played again, its mean regresses, and another takes its place; one that stays is a world that fails.
+    ``tell_reevaluations``: the base optimiser is told the re-evaluations too (a GP learns its noise level from
+    them); else only its own round (CMA-ES must be told exactly what it asked). Report by
+    ``reported_evaluation``, which pools a latent's evaluations.
+    """
+
+    whole_generations = True
+
+    def __init__(self, base: Optimiser, reevaluations: int, name: str, tell_reevaluations: bool = False):
+        super().__init__(base.dim, base.maximize, base.seed)
+        if reevaluations < 1:
+            raise WorldagentError(f"reevaluations={reevaluations}; re-ask at least one incumbent per generation.")
+        self.base, self.reevaluations, self.name = base, int(reevaluations), name
+        self.tell_reevaluations = tell_reevaluations
+        self.pooled = Pooled(base.dim)
+        self._pending: np.ndarray | None = None
+
+    @property
+    def batch_size(self) -> int:
+        return self.base.batch_size + self.reevaluations
+
+    def ask(self, n: int) -> np.ndarray:
+        if n != self.batch_size:
+            raise WorldagentError(f"{self.name} asks a whole generation of {self.batch_size}; asked for {n}.")
+        if self._pending is not None:
+            raise WorldagentError(f"{self.name}: tell() the scores of the last generation before asking again.")
+        fresh = np.asarray(self.base.ask(self.base.batch_size), np.float64)
+        again = self.pooled.best(self.reevaluations)
+        again = np.vstack([again, fresh[: self.reevaluations - len(again)]])  # nothing scored yet: the round's own
+        self._pending = np.vstack([fresh, again])
+        return self._pending.copy()
+
+    def tell(self, z, scores) -> None:
+        z, scores = self._checked(z, scores)
+        if self._pending is None or not np.array_equal(z, self._pending):
+            raise WorldagentError(f"{self.name} must be told the scores of exactly the generation it asked for.")
+        told = len(z) if self.tell_reevaluations else self.base.batch_size
+        self.base.tell(z[:told], scores[:told])
+        self.pooled.add(z, self._minimised(scores))
+        self._pending = None
+
+    def incumbent(self) -> tuple[np.ndarray, float, int]:
+        """(latent, pooled mean in the search's direction, evaluations) of the best pooled mean so far."""
+        z = self.pooled.best(1)[0]
+        mean = self.pooled.mean(z)
+        return z, -mean if self.maximize else mean, self.pooled.count(z)
+
+
+def reported_evaluation(evaluations: Sequence[Any], maximize: bool) -> Any:
+    """The world a search reports: the latent with the best mean over all its evaluations.
+
+    A search that re-evaluates vouches only for the latents it re-evaluated, so when some latent was evaluated
+    more than once the pick is among those; otherwise (a search without re-evaluation) among all, and it is
+    ``campaign.best_evaluation``'s. Given worlds (no latent) are each their own world.
+
+    Returns:
+        The pick's first ``store.Evaluation`` with ``score`` its pooled mean and ``episodes`` all its episodes
+        (what ``analysis.confirm`` reports as found), or None when no score is finite.
+    """
+    import dataclasses
+
+    groups: dict[Any, list] = {}
+    for e in evaluations:
+        if np.isfinite(e.score):
+            groups.setdefault(latent_key(e.latent) if np.size(e.latent) else (e.campaign, e.generation, e.slot), []).append(e)
+    if not groups:
+        return None
+    repeated = [g for g in groups.values() if len(g) > 1]
+    candidates = repeated or list(groups.values())
+    means = np.array([sum(e.score * max(len(e.episodes), 1) for e in g) / sum(max(len(e.episodes), 1) for e in g) for g in candidates])
+    pick = int(np.argmax(means) if maximize else np.argmin(means))
+    group = candidates[pick]
+    return dataclasses.replace(group[0], score=float(means[pick]), episodes=[episode for e in group for episode in e.episodes])
+
+
 def make_optimiser(name: str, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()) -> Optimiser:
-    """The optimiser called ``name`` ("cmaes", "bo" or "random")."""
+    """The optimiser called ``name`` (one of ``OPTIMISERS`` or ``NOISE_AWARE``)."""
+    if name == "cmaes-re":
+        if config.popsize - CMAES_REEVALUATIONS < 2:
+            raise WorldagentError(
+                f"cmaes-re: popsize {config.popsize} leaves CMA-ES under 2 samples beside {CMAES_REEVALUATIONS} re-evaluations; raise it."
+            )
+        base = CMAES(dim, maximize, seed, dataclasses_replace(config, popsize=config.popsize - CMAES_REEVALUATIONS))
+        return Reevaluating(base, CMAES_REEVALUATIONS, name)
+    if name == "bo-noise":
+        return Reevaluating(NoisyBayesOpt(dim, maximize, seed, config), BO_REEVALUATIONS, name, tell_reevaluations=True)
     kinds = {"cmaes": CMAES, "bo": BayesOpt, "random": RandomSearch}
     if name not in kinds:
-        raise WorldagentError(f"unknown optimiser {name!r}; use one of: {', '.join(OPTIMISERS)}.")
+        raise WorldagentError(f"unknown optimiser {name!r}; use one of: {', '.join(OPTIMISERS + NOISE_AWARE)}.")
     return kinds[name](dim, maximize, seed, config)

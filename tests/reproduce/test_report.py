@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 import pytest
+from scipy.stats import beta
 from typer.testing import CliRunner
 
 from worldagent.cli import app
@@ -15,7 +16,7 @@ from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reports.html import SECTIONS, build_report
 from worldagent.reproduce.manifest import Manifest
-from worldagent.store import RunStore
+from worldagent.store import RunStore, world_digest
 
 
 def data_values(page: str) -> dict[str, float]:
@@ -182,14 +183,23 @@ def test_the_failure_atlas_section_is_recomputed_from_the_store(racing_run):
         grid = store.campaign("atlas-min-return-s0").config["atlas"]["grid"]
         mc = store.evaluations("failure-mc-crash_rate>0.5-s0")
         assert store.campaign("failure-is-crash_rate>0.5-s0") is not None
-    cells = set()
+    cells, elites = set(), {}
     for evaluation in atlas:
         world = spec.world_from_arrays(evaluation.world)
         index = []
         for name, count, (low, high) in zip(grid["descriptors"], grid["cells"], grid["ranges"]):
             index.append(min(count - 1, max(0, int(np.floor((spec.metrics.descriptors[name](world) - low) / (high - low) * count)))))
         cells.add(tuple(index))
+        if tuple(index) not in elites or evaluation.score < elites[tuple(index)].score:
+            elites[tuple(index)] = evaluation  # each cell's lowest return, the earliest on ties
     failing = [e for e in atlas if episode_mean(e, "crashed") > 0.5]
+    # the corrected archive: every elite's stored confirmation (32 fresh episodes), a crash rate beyond 0.5 by its exact interval
+    with RunStore(out / "racing" / "store.sqlite", create=False) as store:
+        fresh = {c.world: [float(e["crashed"]) for e in c.episodes] for c in store.confirmations() if c.repeats == 32}
+    crashes = [fresh[world_digest(e.world)] for e in elites.values()]
+    assert shown["racing.atlas.found.failing_cells"] == sum(episode_mean(e, "crashed") > 0.5 for e in elites.values())
+    assert shown["racing.atlas.confirmed.failing_cells"] == sum(beta.ppf(0.025, sum(c), len(c) - sum(c) + 1) > 0.5 for c in crashes if sum(c))
+    assert "racing.atlas.confirmed.qd_score" in shown
     assert shown["racing.atlas.evaluations"] == len(atlas) == 105
     assert shown["racing.atlas.coverage"] == pytest.approx(len(cells) / np.prod(grid["cells"]))
     assert shown["racing.atlas.failing"] == len(failing)

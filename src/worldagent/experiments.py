@@ -26,6 +26,7 @@ import jax
 import numpy as np
 
 from worldagent.agents.policy import agent_record
+from worldagent.analysis.confirm import REPEATS as CONFIRM_REPEATS
 from worldagent.envs import registry
 from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
@@ -281,22 +282,29 @@ def strategic_evaluation(
     progress: bool = True,
     resume: bool = True,
     config: OptimiserConfig | None = None,
+    confirm: int = CONFIRM_REPEATS,
 ) -> dict:
-    """Find the worlds that minimise and maximise ``metric`` (paper §6.1.2, Figure 6b).
+    """Find the worlds that minimise and maximise ``metric`` (paper §6.1.2, Figure 6b), and confirm them.
+
+    The worst of many noisy scores is partly luck (the winner's curse), so each of the two worlds is
+    replayed on ``confirm`` fresh episodes (``analysis.confirm``; selection ``strategic:<campaign>``).
 
     Args:
         store: the run store; ``setup``: env, agents, generator.
         metric: a metric of the env, an alias, or "reward".
         budget: evaluated worlds per direction (CMA-ES rounds up to whole generations).
-        seed: seed of both campaigns.
+        seed: seed of both campaigns (and of the confirmation stream).
         optimiser: "cmaes" (the paper's), "bo" or "random".
         config: optimiser settings (default ``OptimiserConfig()``: CMA-ES population 21).
+        confirm: fresh episodes per found world (0: none).
 
     Returns:
         {"min": Evaluation, "max": Evaluation (both with their worlds), "campaigns": [name_min,
         name_max], "keys": (keys_min, keys_max), "metric": canonical name, "notes": (note_min,
-        note_max)}: the ``[repeats]`` episode keys each world was scored with (to replay the
-        scored episodes) and ``spec.episode_note`` of each ("", or e.g. ", 6/8 episodes crashed").
+        note_max), "confirmed": (ConfirmedWorld | None, ConfirmedWorld | None), "confirm": the
+        episodes per world, "selections": (name_min, name_max)}: the ``[repeats]`` episode keys each
+        world was scored with (to replay the scored episodes) and ``spec.episode_note`` of each ("", or
+        e.g. ", 6/8 episodes crashed"); ``confirmed`` is (None, None) when ``confirm`` is 0.
     """
     metric = setup.metric(metric)
     names = strategic_campaign_names(optimiser, metric, seed)
@@ -318,15 +326,47 @@ def strategic_evaluation(
         found[direction] = with_world(store, best(evaluations, maximize))
     keys = tuple(scored_keys_of(store, found[d]) for d in ("min", "max"))
     notes = tuple(episode_note(setup.spec, found[d]) for d in ("min", "max"))
-    return {"min": found["min"], "max": found["max"], "campaigns": list(names), "keys": keys, "metric": metric, "notes": notes}
+    selections = tuple(selection_name("strategic", name) for name in names)
+    confirmed = tuple(
+        confirm_reported(store, setup, found[d], selections[i], repeats=confirm, seed=seed, progress=progress) for i, d in enumerate(("min", "max"))
+    )
+    return {
+        "min": found["min"],
+        "max": found["max"],
+        "campaigns": list(names),
+        "keys": keys,
+        "metric": metric,
+        "notes": notes,
+        "confirmed": confirmed,
+        "confirm": int(confirm),
+        "selections": selections,
+    }
+
+
+def selection_name(command: str, campaign: str) -> str:
+    """``strategic:cmaes-min-return-s0``: the provenance name (``store.selections``) of the world ``command`` reports from ``campaign``."""
+    return f"{command}:{campaign}"
+
+
+def confirm_reported(store: RunStore, setup: Setup, evaluation: Evaluation, name: str, *, repeats: int, seed: int, progress: bool = True) -> Any:
+    """The ``analysis.confirm.ConfirmedWorld`` of one reported world (``repeats`` fresh episodes), None when ``repeats`` is 0."""
+    from worldagent.analysis.confirm import confirm
+
+    confirmed = confirm(store, setup, [evaluation], name=name, repeats=repeats, seed=seed, progress=progress)
+    return confirmed[0] if confirmed else None
 
 
 def episode_note(spec: EnvSpec, evaluation: Evaluation) -> str:
     """``spec.episode_note`` of an evaluation's episodes ("" when the env has none)."""
-    if spec.episode_note is None or not evaluation.episodes:
+    return episodes_note(spec, evaluation.episodes)
+
+
+def episodes_note(spec: EnvSpec, episodes: Sequence[dict]) -> str:
+    """``spec.episode_note`` of episodes (a confirmation's or an evaluation's); "" when the env has none."""
+    if spec.episode_note is None or not episodes:
         return ""
-    shared = set.intersection(*(set(e) for e in evaluation.episodes))
-    return spec.episode_note({n: np.asarray([e[n] for e in evaluation.episodes]) for n in shared})
+    shared = set.intersection(*(set(e) for e in episodes))
+    return spec.episode_note({n: np.asarray([e[n] for e in episodes]) for n in shared})
 
 
 def compare_optimisers(
@@ -383,6 +423,72 @@ def compare_optimisers(
             )
             runs[optimiser].append(np.array([e.score for e in evaluations[:limit]], np.float64))
     return runs
+
+
+def comparison_selection_name(maximize: bool, metric: str) -> str:
+    """``compare:min-return``: the provenance name of the worlds an optimiser comparison reports (one per
+    optimiser and seed; ``store.selections`` keeps each one's campaign, generation and slot)."""
+    return selection_name("compare", f"{'max' if maximize else 'min'}-{metric}")
+
+
+def comparison_picks(
+    store: RunStore,
+    metric: str,
+    *,
+    maximize: bool,
+    optimisers: Sequence[str],
+    budget: int,
+    budgets: Mapping[str, int] | None = None,
+    seeds: Sequence[int],
+) -> dict[str, list[Evaluation]]:
+    """{optimiser: [the world each seed's campaign reports: its best within its budget, with its world]} of a
+    stored comparison (``compare_optimisers`` with the same arguments, ``metric`` canonical)."""
+    picks: dict[str, list[Evaluation]] = {}
+    for optimiser in optimisers:
+        limit = int((budgets or {}).get(optimiser) or budget)
+        picks[optimiser] = []
+        for seed in seeds:
+            name = comparison_campaign_name(optimiser, maximize, metric, seed)
+            evaluations = store.evaluations(name)[:limit]
+            if not evaluations:
+                raise WorldagentError(f"campaign {name!r} is not in {store.path}; run compare_optimisers first.")
+            picks[optimiser].append(with_world(store, best(evaluations, maximize)))
+    return picks
+
+
+def confirm_optimisers(
+    store: RunStore,
+    setup: Setup,
+    metric: str = "reward",
+    *,
+    maximize: bool = False,
+    optimisers: Sequence[str] = ("cmaes", "bo", "random"),
+    budget: int,
+    budgets: Mapping[str, int] | None = None,
+    seeds: Sequence[int] = (0, 1, 2),
+    repeats: int = CONFIRM_REPEATS,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict[str, list[Any]]:
+    """Replay the world each optimiser and seed of a comparison reports on ``repeats`` fresh episodes (issue 50).
+
+    Figure 7 ranks optimisers by their best world; a best of many 8-episode scores is partly luck, so the
+    ranking is made again on these confirmed values (``reports.comparison.confirmed_efficiency``). All the
+    picks are confirmed in one call (selection ``comparison_selection_name``), from the confirmation stream
+    of ``seed``: a world two campaigns report plays the same fresh episodes. Stored and read back on a rerun.
+
+    Returns:
+        {optimiser: [``analysis.confirm.ConfirmedWorld`` per seed]}, {} when ``repeats`` is 0.
+    """
+    from worldagent.analysis.confirm import confirm
+
+    metric = setup.metric(metric)
+    picks = comparison_picks(store, metric, maximize=maximize, optimisers=optimisers, budget=budget, budgets=budgets, seeds=seeds)
+    flat = [pick for optimiser in optimisers for pick in picks[optimiser]]
+    confirmed = confirm(store, setup, flat, name=comparison_selection_name(maximize, metric), repeats=repeats, seed=seed, progress=progress)
+    if not confirmed:
+        return {}
+    return {optimiser: confirmed[i * len(seeds) : (i + 1) * len(seeds)] for i, optimiser in enumerate(optimisers)}
 
 
 def scored_keys_of(store: RunStore, evaluation: Evaluation) -> Any:

@@ -23,6 +23,7 @@ from worldagent.commands.options import (
     ray_address_flag,
     stochastic_flag,
 )
+from worldagent.commands.strategic import check_confirm, confirm_flag
 
 
 def register(app: typer.Typer) -> None:
@@ -39,6 +40,7 @@ def register(app: typer.Typer) -> None:
         optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes, bo or random."),
         budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate (rounded up to whole CMA-ES generations)."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+        confirm: int = confirm_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the optimiser and of every episode."),
         out: Path = typer.Option(Path("runs/search"), "--out", help="Run directory; its store.sqlite may hold many campaigns."),
         name: str = typer.Option(None, "--name", help="Campaign name (default: optimiser-direction-objective-seed)."),
@@ -54,9 +56,11 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from worldagent import experiments
+        from worldagent.reports.strategic import reported_line, winners_curse
         from worldagent.store import RunStore
 
         check_counts(budget=budget, repeats=repeats)
+        check_confirm(confirm)
         check_seed(seed)
         check_metric(env, objective)
         check_optimiser(optimiser)
@@ -77,9 +81,16 @@ def register(app: typer.Typer) -> None:
                 resume=resume,
                 progress=not quiet,
             )
+            best = experiments.best(evaluations, maximize=not minimize)
+            name = experiments.selection_name("search", spec.name)
+            confirmed = experiments.confirm_reported(store, setup, best, name, repeats=confirm, seed=seed, progress=not quiet)
         scores = np.array([e.score for e in evaluations])
-        best = evaluations[int(np.nanargmin(scores) if minimize else np.nanargmax(scores))]
+        direction = "min" if minimize else "max"
         console.print(
-            f"{spec.name}: {len(evaluations)} worlds; {spec.objective} mean {np.nanmean(scores):.4g}; {'min' if minimize else 'max'} {best.score:.4g} "
-            f"(generation {best.generation}, slot {best.slot}) -> {out / 'store.sqlite'}"
+            f"{spec.name}: {len(evaluations)} worlds; {spec.objective} mean {np.nanmean(scores):.4g}; {direction} world "
+            f"(generation {best.generation}, slot {best.slot}): {reported_line(setup.spec, best, confirmed, spec.objective)} -> {out / 'store.sqlite'}",
+            markup=False,
         )
+        caveat = winners_curse(confirmed, spec.objective, direction, not minimize)
+        if caveat:
+            console.print(f"  {caveat}", markup=False)

@@ -1,7 +1,9 @@
 """``worldagent strategic`` and ``worldagent compare``: the paper's §6.1.2 and §6.1.3 from the shell.
 
 Both resume by default: their campaigns live in the run store under fixed names, so a rerun
-evaluates nothing new and only redraws the figures.
+evaluates nothing new and only redraws the figures. Both confirm the worlds they report on fresh
+episodes (``--confirm N``, 64 by default; 0 skips) and print the found figure (the selection's)
+beside the confirmed one; the confirmations are stored too and read back on a rerun.
 """
 
 from __future__ import annotations
@@ -42,6 +44,25 @@ def optimiser_names(text: str) -> tuple[str, ...]:
     return tuple(names)
 
 
+def confirm_flag():
+    """``--confirm N``: fresh episodes per reported world (``analysis.confirm.REPEATS`` by default; 0 skips)."""
+    from worldagent.analysis.confirm import REPEATS
+
+    return typer.Option(
+        REPEATS,
+        "--confirm",
+        help="Fresh episodes (from keys no search draws) to confirm each reported world on; 0 skips. A found world's score is "
+        "the best of many noisy ones (partly luck); the confirmed one is the world's.",
+    )
+
+
+def check_confirm(confirm: int) -> int:
+    """``--confirm`` must be a count of episodes (0: skip)."""
+    if confirm < 0:
+        raise WorldagentError(f"--confirm {confirm}; pass a number of fresh episodes per reported world (64 by default), or 0 to skip.")
+    return confirm
+
+
 def register(app: typer.Typer) -> None:
     """Add ``strategic`` and ``compare`` to ``app``."""
 
@@ -56,8 +77,9 @@ def register(app: typer.Typer) -> None:
         random_worlds: int = typer.Option(1000, "--random-worlds", help="Random worlds for the reference distribution (the paper: 1,000)."),
         optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes (the paper's), bo or random."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
+        confirm: int = confirm_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the campaigns and of every episode."),
-        out: Path = typer.Option(Path("runs/strategic"), "--out", help="Run directory: store.sqlite and the figure."),
+        out: Path = typer.Option(Path("runs/strategic"), "--out", help="Run directory: store.sqlite, the figure and its JSON."),
         option: list[str] = option_flag(),
         greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
         stochastic: bool = stochastic_flag(),
@@ -69,10 +91,11 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from worldagent import experiments
-        from worldagent.reports.strategic import draw_strategic
+        from worldagent.reports.strategic import draw_strategic, strategic_lines, write_strategic_json
         from worldagent.store import RunStore
 
         check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
+        check_confirm(confirm)
         check_seed(seed)
         metric = check_metric(env, metric)
         check_optimiser(optimiser)
@@ -82,13 +105,17 @@ def register(app: typer.Typer) -> None:
         )
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=seed, progress=not quiet)
-            found = experiments.strategic_evaluation(store, setup, metric, budget=budget, seed=seed, optimiser=optimiser, progress=not quiet)
+            found = experiments.strategic_evaluation(
+                store, setup, metric, budget=budget, seed=seed, optimiser=optimiser, progress=not quiet, confirm=confirm
+            )
         scores = np.array([e.score for e in randoms])
-        low, high = found["min"], found["max"]
-        figure = draw_strategic(setup, found, scores, metric, out / f"strategic-{metric}-s{seed}.png")
+        figure = draw_strategic(setup, found, scores, metric, out / f"strategic-{found['metric']}-s{seed}.png")
+        summary = write_strategic_json(setup.spec, found, randoms, out / f"strategic-{found['metric']}-s{seed}.json")
+        console.print(f"{env} {found['metric']} ({optimiser}, {budget} worlds each way):", markup=False)
+        for line in strategic_lines(setup.spec, found):
+            console.print(f"  {line}", markup=False)
         console.print(
-            f"{env} {metric}: min {low.score:.4g}{experiments.episode_note(setup.spec, low)}; max {high.score:.4g}{experiments.episode_note(setup.spec, high)}; "
-            f"random mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g}, {len(scores)} worlds) -> {figure}"
+            f"  random mean {np.nanmean(scores):.4g} (sd {np.nanstd(scores):.3g}, {len(scores)} worlds) -> {figure}, {summary}", markup=False
         )
 
     @app.command()
@@ -107,7 +134,10 @@ def register(app: typer.Typer) -> None:
             1000, "--random-seed", help="Seed of the reference random worlds (not one of the optimisers' seeds, so random search never replays them)."
         ),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
-        out: Path = typer.Option(Path("runs/compare"), "--out", help="Run directory: store.sqlite, comparison.png/.md/.csv."),
+        confirm: int = confirm_flag(),
+        out: Path = typer.Option(
+            Path("runs/compare"), "--out", help="Run directory: store.sqlite, comparison.png/.md/.csv (and with --confirm, .json and -confirmed.csv)."
+        ),
         option: list[str] = option_flag(),
         greedy: bool = typer.Option(False, "--greedy", help="Trained actor-critics act by argmax instead of sampling."),
         stochastic: bool = stochastic_flag(),
@@ -119,10 +149,19 @@ def register(app: typer.Typer) -> None:
         import numpy as np
 
         from worldagent import experiments
-        from worldagent.reports.comparison import comparison_figure, comparison_table_markdown, sample_efficiency, write_comparison
+        from worldagent.reports.comparison import (
+            comparison_figure,
+            comparison_table_markdown,
+            confirmed_efficiency,
+            confirmed_table_markdown,
+            ordering,
+            sample_efficiency,
+            write_comparison,
+        )
         from worldagent.store import RunStore
 
         check_counts(budget=budget, seeds=seeds, random_worlds=random_worlds, repeats=repeats)
+        check_confirm(confirm)
         names = optimiser_names(optimisers)
         check_seed(random_seed, "--random-seed")
         if random_seed < seeds:
@@ -135,12 +174,17 @@ def register(app: typer.Typer) -> None:
         maximize = not minimize
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=random_seed, progress=not quiet)
-            runs = experiments.compare_optimisers(
-                store, setup, metric, maximize=maximize, optimisers=names, budget=budget, seeds=tuple(range(seeds)), progress=not quiet
-            )
+            arguments = {"maximize": maximize, "optimisers": names, "budget": budget, "seeds": tuple(range(seeds)), "progress": not quiet}
+            runs = experiments.compare_optimisers(store, setup, metric, **arguments)
+            confirmed = experiments.confirm_optimisers(store, setup, metric, repeats=confirm, **arguments)
         random_scores = np.array([e.score for e in randoms])
         rows = sample_efficiency(runs, random_scores, maximize=maximize)
         figure = comparison_figure(runs, random_scores, metric, out / "comparison.png", maximize=maximize)
-        table, csv_path = write_comparison(rows, out, metric, maximize)
         typer.echo(comparison_table_markdown(rows, metric, maximize))
-        console.print(f"wrote {figure}, {table}, {csv_path}")
+        checked, verdict = None, None
+        if confirmed:
+            checked = confirmed_efficiency(runs, confirmed, metric, maximize)
+            verdict = ordering(checked, confirmed, metric, maximize)
+            typer.echo(confirmed_table_markdown(checked, verdict, metric, maximize))
+        written = write_comparison(rows, out, metric, maximize, checked, verdict)
+        console.print(f"wrote {figure}, {', '.join(map(str, written))}", markup=False)

@@ -9,6 +9,14 @@ budget", so the median itself is "not reached" when half the seeds or more never
 
 ``runs`` everywhere is ``{optimiser: [f[n] scores in evaluation order, one array per seed]}``,
 as ``search.experiments.compare_optimisers`` returns it.
+
+A seed's best world is the best of many noisy scores, partly luck (the winner's curse), so the
+optimisers are also ranked by the *confirmed* value of the world each seed reports
+(``experiments.confirm_optimisers``: ``{optimiser: [analysis.confirm.ConfirmedWorld per seed]}``),
+over seeds, with intervals, at the episodes each spent with its confirmation counted
+(``confirmed_efficiency``); ``ordering`` says in words whether the paper's ordering (ES finds more
+extreme worlds than BO, which beats random; §6.1.3) survives on confirmed values, or that the intervals
+cannot tell.
 """
 
 from __future__ import annotations
@@ -23,6 +31,8 @@ from worldagent.errors import WorldagentError
 from worldagent.files import write_atomically, write_text
 
 QUANTILES = (0.1, 0.05, 0.01)
+PAPER_ORDER = ("cmaes", "bo", "random")  # §6.1.3: ES finds lower reward than BO, which beats random search
+CONFIDENCE = 0.95
 
 
 def thresholds(random_scores: np.ndarray, quantiles: Sequence[float], maximize: bool) -> dict[float, float]:
@@ -169,13 +179,235 @@ def comparison_csv(rows: list[dict]) -> str:
     return buffer.getvalue()
 
 
-def write_comparison(rows: list[dict], out_dir: Path | str, metric: str = "score", maximize: bool = False) -> tuple[Path, Path]:
-    """Write ``comparison.md`` and ``comparison.csv`` into ``out_dir`` (atomically)."""
+def write_comparison(
+    rows: list[dict],
+    out_dir: Path | str,
+    metric: str = "score",
+    maximize: bool = False,
+    confirmed: list[dict] | None = None,
+    order: dict | None = None,
+) -> tuple[Path, ...]:
+    """Write ``comparison.md`` and ``comparison.csv`` into ``out_dir`` (atomically); with ``confirmed`` rows
+    (``confirmed_efficiency``) and their ``ordering``, the confirmed table beside the found one in the
+    Markdown, ``comparison-confirmed.csv`` and ``comparison.json`` (both tables and the verdict) too."""
+    import json
+
     out_dir = Path(out_dir)
+    markdown = comparison_table_markdown(rows, metric, maximize)
+    if confirmed:
+        markdown += "\n" + confirmed_table_markdown(confirmed, order or {}, metric, maximize)
+    paths = (write_text(out_dir / "comparison.md", markdown), write_text(out_dir / "comparison.csv", comparison_csv(rows)))
+    if not confirmed:
+        return paths
+    from worldagent.influence.statistics import json_safe
+
+    document = json_safe({"metric": metric, "maximize": maximize, "found": rows, "confirmed": confirmed, "ordering": order or {}})
     return (
-        write_text(out_dir / "comparison.md", comparison_table_markdown(rows, metric, maximize)),
-        write_text(out_dir / "comparison.csv", comparison_csv(rows)),
+        *paths,
+        write_text(out_dir / "comparison-confirmed.csv", comparison_csv(confirmed)),
+        write_text(out_dir / "comparison.json", json.dumps(document, indent=2, default=_json_value) + "\n"),
     )
+
+
+def _json_value(value):
+    """JSON for numpy numbers (NaN as null)."""
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
+# -- ranked by confirmed values (issue 50) --------------------------------------------------------
+
+
+def seed_interval(values: Sequence[float], confidence: float = CONFIDENCE) -> tuple[float, float, float]:
+    """(mean, low, high): the mean of per-seed values and its Student's t interval over seeds (NaN bounds for one seed)."""
+    from scipy import stats
+
+    values = np.asarray(values, np.float64)
+    mean = float(values.mean())
+    if len(values) < 2:
+        return mean, float("nan"), float("nan")
+    half = float(stats.t.ppf(1 - (1 - confidence) / 2, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values)))
+    return mean, mean - half, mean + half
+
+
+def welch_difference(a: Sequence[float], b: Sequence[float], confidence: float = CONFIDENCE) -> tuple[float, float, float]:
+    """(mean(a) − mean(b), low, high): Welch's interval of a difference of means (each side needs two values)."""
+    from scipy import stats
+
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    difference = float(a.mean() - b.mean())
+    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
+    se = float(np.sqrt(va + vb))
+    if se == 0:
+        return difference, difference, difference
+    df = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
+    half = float(stats.t.ppf(1 - (1 - confidence) / 2, df) * se)
+    return difference, difference - half, difference + half
+
+
+def _confirmed_means(worlds: Sequence, metric: str) -> np.ndarray:
+    return np.array([c.confirmed(metric).mean for c in worlds], np.float64)
+
+
+def confirmed_efficiency(runs: dict[str, list[np.ndarray]], confirmed: dict[str, list], metric: str, maximize: bool = False) -> list[dict]:
+    """One row per optimiser: the confirmed value of the world each seed reports, over seeds, and the episodes spent.
+
+    Args:
+        runs: {optimiser: per-seed f[n] scores within the budget} (``compare_optimisers``).
+        confirmed: {optimiser: [``ConfirmedWorld`` per seed, in ``runs``' seed order]} (``confirm_optimisers``).
+        metric: the compared metric; maximize: the direction the optimisers pushed.
+
+    Returns:
+        Dicts with ``optimiser``; ``seeds``; ``found`` / ``confirmed`` (per seed: the reported world's found
+        figure, the selection's, and its confirmed mean), ``confirmed_low`` / ``confirmed_high`` (per seed: the
+        world's 95% interval over its fresh episodes); ``found_mean``; ``confirmed_mean`` with
+        ``confirmed_mean_low`` / ``confirmed_mean_high`` (a t interval over seeds; with one seed, that world's
+        interval over episodes: ``interval_over`` says which); ``search_episodes``, ``confirmation_episodes``
+        and ``episodes`` (their sum, over seeds: the equal budget with confirmation counted); ``rank`` and
+        ``found_rank`` (1: the most extreme in the search's direction, by confirmed and by found means).
+    """
+    missing = [name for name in runs if len(confirmed.get(name, ())) != len(runs[name])]
+    if missing:
+        raise WorldagentError(f"optimiser {missing[0]!r} has no confirmed world for every seed; run confirm_optimisers first.")
+    rows = []
+    for name, seeds in runs.items():
+        worlds = confirmed[name]
+        means = _confirmed_means(worlds, metric)
+        intervals = [c.confirmed(metric) for c in worlds]
+        mean, low, high = seed_interval(means)
+        over = "seeds"
+        if len(worlds) == 1:
+            mean, low, high, over = intervals[0].mean, intervals[0].low, intervals[0].high, "episodes"
+        searched = int(sum(len(s) * len(c.selected.episodes) for s, c in zip(seeds, worlds)))
+        confirmation = int(sum(c.repeats for c in worlds))
+        found = [float(c.found(metric).mean) for c in worlds]
+        rows.append(
+            {
+                "optimiser": name,
+                "seeds": len(worlds),
+                "found": found,
+                "confirmed": [float(v) for v in means],
+                "confirmed_low": [float(i.low) for i in intervals],
+                "confirmed_high": [float(i.high) for i in intervals],
+                "confirmation_repeats": [c.repeats for c in worlds],
+                "found_mean": float(np.mean(found)),
+                "confirmed_mean": float(mean),
+                "confirmed_mean_low": float(low),
+                "confirmed_mean_high": float(high),
+                "interval_over": over,
+                "search_episodes": searched,
+                "confirmation_episodes": confirmation,
+                "episodes": searched + confirmation,
+            }
+        )
+    for key, rank in (("confirmed_mean", "rank"), ("found_mean", "found_rank")):
+        extreme = [-row[key] if maximize else row[key] for row in rows]
+        for row, value in zip(rows, extreme):
+            row[rank] = 1 + sum(other < value for other in extreme)  # ties share a place
+    return rows
+
+
+def _pair_difference(better: Sequence, worse: Sequence, metric: str, maximize: bool) -> dict:
+    """How far ``worse``'s confirmed worlds sit from ``better``'s, signed so that > 0 agrees with the paper
+    (over seeds when both have two; else over the pooled fresh episodes of their worlds)."""
+    from worldagent.analysis.confirm import metric_values
+
+    sign = -1.0 if maximize else 1.0
+    if len(better) > 1 and len(worse) > 1:
+        a, b, over = _confirmed_means(worse, metric), _confirmed_means(better, metric), "seeds"
+    else:
+        pooled = lambda worlds: np.concatenate([metric_values(c.episodes, metric) for c in worlds])  # noqa: E731
+        a, b, over = pooled(worse), pooled(better), "episodes"
+        a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+    difference, low, high = welch_difference(sign * a, sign * b)
+    verdict = "holds" if low > 0 else "reversed" if high < 0 else "cannot tell"
+    return {"mean": difference, "low": low, "high": high, "over": over, "verdict": verdict}
+
+
+def ordering(confirmed_rows: list[dict], confirmed: dict[str, list], metric: str, maximize: bool = False, order: Sequence[str] = PAPER_ORDER) -> dict:
+    """Whether the paper's ordering (``order``: most extreme first) survives on confirmed values, in words.
+
+    Each neighbouring pair of ``order`` (among the optimisers compared) is tested by the interval of the
+    difference between their confirmed values: "holds" when it excludes 0 the paper's way, "reversed" when it
+    excludes 0 the other way, "cannot tell" otherwise. The ordering "survives" when every pair holds, is
+    "contradicted" when a pair is reversed, and otherwise the intervals cannot tell.
+
+    Returns:
+        {"paper": [names], "pairs": [{"better", "worse", "mean", "low", "high", "over", "verdict"}], "verdict":
+        "survives" | "contradicted" | "cannot tell" | "n/a", "confirmed_order": [names by confirmed mean],
+        "found_order": [names by found mean], "text": the sentence}.
+    """
+    by_name = {row["optimiser"]: row for row in confirmed_rows}
+    paper = [name for name in order if name in by_name]
+    ranked = lambda key: [row["optimiser"] for row in sorted(confirmed_rows, key=lambda row: row[key])]  # noqa: E731  (stable: ties keep their order)
+    confirmed_order, found_order = ranked("rank"), ranked("found_rank")
+    result: dict = {"paper": paper, "pairs": [], "confirmed_order": confirmed_order, "found_order": found_order}
+    if len(paper) < 2:
+        return result | {"verdict": "n/a", "text": f"fewer than two of {', '.join(order)} were compared: the paper's ordering is not tested."}
+    for better, worse in zip(paper, paper[1:]):
+        result["pairs"].append({"better": better, "worse": worse, **_pair_difference(confirmed[better], confirmed[worse], metric, maximize)})
+    verdicts = [pair["verdict"] for pair in result["pairs"]]
+    result["verdict"] = "survives" if all(v == "holds" for v in verdicts) else "contradicted" if "reversed" in verdicts else "cannot tell"
+    result["text"] = _ordering_text(result, by_name, metric, maximize)
+    return result
+
+
+def _ordering_text(result: dict, by_name: dict, metric: str, maximize: bool) -> str:
+    """The verdict as sentences: the paper's claim, each pair's difference with its interval, both orders."""
+    word = "above" if maximize else "below"
+    claim = f" {word} ".join(result["paper"])
+    row = next(iter(by_name.values()))
+    repeats = sorted(set(r for row in by_name.values() for r in row["confirmation_repeats"]))
+    basis = (
+        f"confirmed values ({'/'.join(map(str, repeats))} fresh episodes per reported world, {row['seeds']} seed{'s' if row['seeds'] != 1 else ''})"
+    )
+    pairs = "; ".join(
+        f"{p['worse']} − {p['better']} {'(sign flipped: maximising) ' if maximize else ''}{p['mean']:.4g} [{p['low']:.4g}, {p['high']:.4g}] "
+        f"over {p['over']}: {p['verdict']}"
+        for p in result["pairs"]
+    )
+    head = {
+        "survives": f"On {basis} the paper's ordering ({claim}) survives",
+        "contradicted": f"On {basis} the paper's ordering ({claim}) does not survive: a pair is reversed beyond its interval",
+        "cannot tell": f"On {basis} the intervals cannot tell whether the paper's ordering ({claim}) holds",
+    }[result["verdict"]]
+    orders = lambda names, key: ", ".join(f"{n} {by_name[n][key]:.4g}" for n in names)  # noqa: E731
+    return (
+        f"{head}: {pairs}. Confirmed means rank them {orders(result['confirmed_order'], 'confirmed_mean')}; "
+        f"the found figures (the selections', biased by the pick) ranked them {orders(result['found_order'], 'found_mean')}."
+    )
+
+
+def confirmed_table_markdown(rows: list[dict], order: dict, metric: str = "score", maximize: bool = False) -> str:
+    """A Markdown table of ``confirmed_efficiency`` rows and the ``ordering`` verdict beneath it."""
+    if not rows:
+        raise WorldagentError("no confirmed rows to tabulate; run confirm_optimisers first.")
+    head = [
+        "optimiser",
+        "rank (confirmed)",
+        f"confirmed {metric} of the reported world (mean over seeds, 95% interval)",
+        "per seed: confirmed [95% interval]",
+        f"found {metric} (the selection's, mean over seeds)",
+        "rank (found)",
+        "episodes: search + confirmation = total",
+    ]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for row in sorted(rows, key=lambda r: r["rank"]):
+        interval = "" if not np.isfinite(row["confirmed_mean_low"]) else f" [{row['confirmed_mean_low']:.4g}, {row['confirmed_mean_high']:.4g}]"
+        over = " (one seed: over its episodes)" if row["interval_over"] == "episodes" else ""
+        seeds = "; ".join(f"{m:.4g} [{lo:.4g}, {hi:.4g}]" for m, lo, hi in zip(row["confirmed"], row["confirmed_low"], row["confirmed_high"]))
+        cells = [
+            row["optimiser"],
+            str(row["rank"]),
+            f"{row['confirmed_mean']:.4g}{interval}{over}",
+            seeds,
+            f"{row['found_mean']:.4g}",
+            str(row["found_rank"]),
+            f"{row['search_episodes']:,} + {row['confirmation_episodes']:,} = {row['episodes']:,}",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", order.get("text", ""), ""]
+    return "\n".join(lines)
 
 
 def tail_fraction(values: np.ndarray, random_scores: np.ndarray, maximize: bool) -> np.ndarray:

@@ -187,19 +187,90 @@ def strategic_section(run_dir: Path, results: dict) -> str:
             found = res[label]
             rows.append(
                 [
-                    f"<td>{label}imising world ({esc(found['campaign'])}, generation {found['generation']}, slot {found['slot']}; "
-                    f"{found['evaluated']} worlds searched)</td>",
+                    f"<td>{label}imising world, found: the selection's figure ({esc(found['campaign'])}, generation {found['generation']}, "
+                    f"slot {found['slot']}; {found['evaluated']} worlds searched)</td>",
                     number(f"{env}.{label}.raw", found["raw"]),
                     number(f"{env}.{label}.normalised", found["normalised"]),
                     *[number(f"{env}.{label}.{name}", found[name]) for name in extra],
                 ]
             )
-        return table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True) + image(
-            res["layout"].figure("strategic"),
-            f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)",
+            if "confirmed" in found:
+                rows.append(confirmed_row(env, label, found["confirmed"], extra))
+        note = (
+            "<p>Found: the world's score on the episodes it was selected on, the best of many noisy scores and so partly luck "
+            "(the winner's curse). Confirmed: the same world replayed on fresh episodes from keys no search drew, with the 95% "
+            "interval of their mean; the confirmed figure is the world's.</p>"
+            if any("confirmed" in res[label] for label in ("min", "max"))
+            else "<p>These worlds were not confirmed on fresh episodes (a run from before confirmation): each figure is the "
+            "selection's own, partly luck.</p>"
+        )
+        return (
+            table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True)
+            + note
+            + image(
+                res["layout"].figure("strategic"),
+                f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)",
+            )
         )
 
     return per_env(results, "strategic", render, "min", "no strategic campaigns in the store")
+
+
+def confirmed_row(env: str, label: str, confirmed: dict, extra) -> list[str]:
+    """A strategic world's confirmed figures: each the fresh episodes' mean and its 95% interval."""
+
+    def cell(name: str) -> str:
+        fresh = confirmed[name]
+        return number(f"{env}.{label}.confirmed.{name}", fresh["mean"], 4, f" [{fmt(fresh['low'], 3)}, {fmt(fresh['high'], 3)}]")
+
+    return [
+        f"<td>{label}imising world, confirmed: the same world on {confirmed['repeats']} fresh episodes</td>",
+        cell("raw"),
+        cell("normalised"),
+        *[cell(name) for name in extra],
+    ]
+
+
+def confirmed_comparison(env: str, res: dict) -> str:
+    """Figure 7 ranked again on confirmed values: each seed's reported world replayed on fresh episodes, the mean over
+    seeds with its interval, the episodes spent with confirmation counted, and whether the paper's ordering survives."""
+    from worldagent.reports.comparison import confirmed_efficiency, ordering
+
+    confirmed = res["compare"].get("confirmed")
+    if not confirmed:
+        return missing("the reported worlds were not confirmed on fresh episodes (a run from before confirmation): ranked by found figures only")
+    runs, metric = res["compare"]["runs"], res["metric"]
+    rows = confirmed_efficiency(runs, confirmed, metric)
+    verdict = ordering(rows, confirmed, metric)
+    body = []
+    for row in sorted(rows, key=lambda row: row["rank"]):
+        opt, key = row["optimiser"], f"{env}.compare.{row['optimiser']}"
+        interval = f" [{fmt(row['confirmed_mean_low'], 3)}, {fmt(row['confirmed_mean_high'], 3)}]"
+        per_seed = zip(row["confirmed"], row["confirmed_low"], row["confirmed_high"])
+        seeds = "; ".join(f"{fmt(m, 3)} [{fmt(lo, 3)}, {fmt(hi, 3)}]" for m, lo, hi in per_seed)
+        body.append(
+            [
+                f"<td>{esc(opt)}</td>",
+                f"<td class='num'>{row['rank']}</td>",
+                number(f"{key}.confirmed_mean", row["confirmed_mean"], 4, interval),
+                f"<td>{esc(seeds)}</td>",
+                number(f"{key}.found_mean", row["found_mean"]),
+                number(f"{key}.episodes", row["episodes"], 6, f" ({row['search_episodes']:,} + {row['confirmation_episodes']:,})"),
+            ]
+        )
+    head = [
+        "optimiser",
+        "rank (confirmed)",
+        f"confirmed {metric} of the reported world (mean over seeds, 95% interval)",
+        "per seed: confirmed [95% interval]",
+        f"found {metric} (the selection's, mean over seeds)",
+        "episodes spent (search + confirmation)",
+    ]
+    return (
+        "<h4>Ranked by confirmed values</h4>"
+        + table(head, body, raw_cells=True)
+        + f"<p data-field='compare-ordering' data-verdict='{esc(verdict['verdict'])}'>{esc(verdict.get('text', ''))}</p>"
+    )
 
 
 def comparison_section(run_dir: Path, results: dict) -> str:
@@ -234,7 +305,9 @@ def comparison_section(run_dir: Path, results: dict) -> str:
         return (
             table(head, body, raw_cells=True)
             + "<p>Worlds each optimiser evaluated (median over seeds) before its first world scoring at or below the random "
-            "distribution's q-quantile; random sampling needs 1/q on average.</p>"
+            "distribution's q-quantile; random sampling needs 1/q on average. Best: found, each seed's best score (the "
+            "selection's, partly luck).</p>"
+            + confirmed_comparison(env, res)
             + image(figure, f"{env}: rewards of the worlds each optimiser sampled while minimising reward, against random worlds (cf. Figure 7)")
         )
 

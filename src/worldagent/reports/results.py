@@ -142,16 +142,64 @@ def store_results(spec, store, done: dict) -> dict:
             found = best_evaluation(evaluations, maximize)
             if found is not None:
                 out[label] = {**world_summary(spec, found, scale), "evaluated": len(evaluations)}
+                confirmed = stored_confirmation(spec, store, found, done["strategic"]["outputs"].get("confirmation"))
+                if confirmed is not None:
+                    out[label]["confirmed"] = confirmed_world_summary(spec, confirmed, scale)
     compare = done["compare"]
     if compare.get("status") == "done" and "campaigns" in compare.get("outputs", {}) and "random" in out:
         config = compare["config"]
         budget = {opt: config.get("bo_budget", config["budget"]) if opt == "bo" else config["budget"] for opt in compare["outputs"]["campaigns"]}
-        runs = {
-            opt: [np.array([e.score for e in store.evaluations(name)[: budget[opt]]], np.float64) for name in names]
-            for opt, names in compare["outputs"]["campaigns"].items()
-        }
+        stored = {opt: [store.evaluations(name)[: budget[opt]] for name in names] for opt, names in compare["outputs"]["campaigns"].items()}
+        runs = {opt: [np.array([e.score for e in seed], np.float64) for seed in seeds] for opt, seeds in stored.items()}
         out["compare"] = {"runs": runs}
+        confirmed = compare_confirmations(spec, store, stored, compare["outputs"].get("confirmation"))
+        if confirmed:
+            out["compare"]["confirmed"] = confirmed
     return out
+
+
+def stored_confirmation(spec, store, evaluation, confirmation: dict | None):
+    """The ``analysis.confirm.ConfirmedWorld`` of a reported evaluation, read back from the store: the world a selection
+    recorded for its (campaign, generation, slot), replayed for the phase's ``confirmation`` (agent, seed, repeats);
+    None when the phase confirmed nothing (runs from before confirmation) or the row is missing."""
+    from worldagent.analysis.confirm import ConfirmedWorld, confirmation_seed
+
+    if not confirmation:
+        return None
+    place = (evaluation.campaign, evaluation.generation, evaluation.slot)
+    digests = [s.world for s in store.selections() if (s.campaign, s.generation, s.slot) == place]
+    seed, repeats = int(confirmation["seed"]), int(confirmation["repeats"])
+    for row in store.confirmations(confirmation["agent"], spec.name):
+        if digests and row.world == digests[-1] and (row.seed, row.repeats) == (seed, repeats):
+            return ConfirmedWorld(evaluation, row.world, row.episodes, confirmation_seed(seed, row.world))
+    return None
+
+
+def confirmed_world_summary(spec, confirmed, scale: Scale) -> dict:
+    """A confirmed world's fresh-episode figures, each a mean with its 95% interval (``analysis.confirm.Interval``):
+    the main metric raw and normalised, and each highlighted metric; and the episodes they came from."""
+    from worldagent.analysis.confirm import mean_interval, metric_values
+
+    raw = metric_values(confirmed.episodes, spec.metrics.main)
+    normalised = np.asarray(spec.metrics.normalise(raw, scale.params, scale.best_episode), np.float64)
+    return {
+        "repeats": confirmed.repeats,
+        "raw": confirmed.confirmed(spec.metrics.main).as_dict(),
+        "normalised": mean_interval(normalised).as_dict(),
+        **{name: confirmed.confirmed(name).as_dict() for name in spec.metrics.highlighted},
+    }
+
+
+def compare_confirmations(spec, store, stored: dict, confirmation: dict | None) -> dict:
+    """{optimiser: [ConfirmedWorld of each seed's reported world]} read back from the store; {} unless every seed's is there."""
+    confirmed = {}
+    for opt, seeds in stored.items():
+        picks = [best_evaluation(seed, False) for seed in seeds]  # the phase minimises (Figure 7)
+        worlds = [None if pick is None else stored_confirmation(spec, store, pick, confirmation) for pick in picks]
+        if not worlds or any(world is None for world in worlds):
+            return {}
+        confirmed[opt] = worlds
+    return confirmed
 
 
 def atlas_results(spec, store, outputs: dict) -> dict:
@@ -234,6 +282,9 @@ def headlines(results: dict[str, dict]) -> list[Headline]:
             for m in spec.metrics.highlighted
         ]
         for side in ("min", "max"):
+            if pick(res, side, "confirmed", "raw", "mean") is not None:
+                rows += confirmed_headlines(env, side, res[side], main, paper, spec.metrics.highlighted)
+                continue
             world = f"{title}: {side}imising world"
             rows.append(
                 Headline(
@@ -245,6 +296,24 @@ def headlines(results: dict[str, dict]) -> list[Headline]:
                 Headline(f"{env}.{side}.{m}", f"{world}, {label(m)}", pick(res, side, m), paper.get(f"{side}.{m}")) for m in spec.metrics.highlighted
             ]
         rows += influence_headlines(env, res)
+    return rows
+
+
+def confirmed_headlines(env: str, side: str, found: dict, main: str, paper: dict, highlighted) -> list[Headline]:
+    """A strategic world's headline rows when it was confirmed: ours is the confirmed figure (fresh episodes; the
+    paper's number beside it), the found one (the selection's, biased by the pick) in the note and in a row of its own."""
+    confirmed, world = found["confirmed"], f"{env.capitalize()}: {side}imising world"
+    rows = []
+    for name, shown in ((main, "normalised"), (main, "raw"), *[(m, m) for m in highlighted]):
+        fresh = confirmed[shown]
+        what = f"{label(name)} ({shown})" if name == main else label(name)
+        note = (
+            f"confirmed on {fresh['episodes']} fresh episodes, 95% [{fresh['low']:.3g}, {fresh['high']:.3g}]; "
+            f"found {found[shown]:.3g} (the selection's, the search's episodes)"
+        )
+        paper_value = paper.get(f"{side}.{shown}") if shown != "raw" else None
+        rows.append(Headline(f"{env}.{side}.confirmed.{shown}", f"{world}, {what}, confirmed", fresh["mean"], paper_value, note))
+        rows.append(Headline(f"{env}.{side}.{shown}", f"{world}, {what}, found (the selection's)", found[shown], None))
     return rows
 
 

@@ -282,25 +282,53 @@ def random_scores(ctx: EnvContext) -> np.ndarray:
 
 
 def strategic_phase(ctx: EnvContext) -> dict:
-    """CMA-ES searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b)."""
+    """CMA-ES searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b); both worlds confirmed
+    on fresh episodes (``analysis.confirm``), found beside confirmed in the outputs."""
     from worldagent import experiments
-    from worldagent.reports.strategic import draw_strategic
+    from worldagent.analysis.confirm import REPEATS, agent_key
+    from worldagent.influence.statistics import json_safe
+    from worldagent.reports.strategic import draw_strategic, strategic_json
 
     setup = ctx.setup()
     with ctx.store() as store:
         result = experiments.strategic_evaluation(
-            store, setup, ctx.metric, budget=ctx.budgets.strategic_budget, seed=ctx.seed, optimiser="cmaes", progress=ctx.progress, resume=True
+            store,
+            setup,
+            ctx.metric,
+            budget=ctx.budgets.strategic_budget,
+            seed=ctx.seed,
+            optimiser="cmaes",
+            progress=ctx.progress,
+            resume=True,
+            confirm=REPEATS,
         )
+        randoms = store.evaluations(experiments.campaign_names(ctx.metric, ctx.seed)["random"])
     low, high = result["min"], result["max"]
     figure = draw_strategic(setup, result, random_scores(ctx), ctx.metric, ctx.layout.figure("strategic"))
+    found = strategic_json(ctx.spec, result, randoms)
     return {
         "store": ctx.layout.rel(ctx.layout.store_path),
         "campaigns": list(result["campaigns"]),
         "min": float(low.score),
         "max": float(high.score),
         "figure": ctx.layout.rel(figure),
-        "summary": f"{ctx.metric}: min {low.score:.4g}, max {high.score:.4g} ({ctx.budgets.strategic_budget} worlds each)",
+        # which stored confirmations are these worlds' (the report re-reads them): the agent, the seed and the repeats
+        "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": REPEATS, "selections": list(result["selections"])},
+        "confirmed": json_safe({side: found[side] for side in ("min", "max")}),
+        "summary": f"{ctx.metric} ({ctx.budgets.strategic_budget} worlds each): " + strategic_summary(result),
     }
+
+
+def strategic_summary(result: dict) -> str:
+    """ "min found -281.7, confirmed -184.6 [-224.7, -144.6] (64 fresh episodes); max found ...": one line per run."""
+    parts = []
+    for side, confirmed in zip(("min", "max"), result["confirmed"]):
+        text = f"{side} found {result[side].score:.4g}"
+        if confirmed is not None:
+            interval = confirmed.confirmed(result["metric"])
+            text += f", confirmed {interval.text()} ({interval.n} fresh episodes)"
+        parts.append(text)
+    return "; ".join(parts)
 
 
 def skipped_for_budget(ctx: EnvContext, budget: str) -> dict:
@@ -324,29 +352,38 @@ def compare_phase(ctx: EnvContext) -> dict:
     if budgets.compare_budget < 1:
         return skipped_for_budget(ctx, "compare_budget")
     from worldagent import experiments
-    from worldagent.reports.comparison import comparison_figure
+    from worldagent.analysis.confirm import REPEATS, agent_key
+    from worldagent.influence.statistics import json_safe
+    from worldagent.reports.comparison import comparison_figure, confirmed_efficiency, ordering
 
+    setup = ctx.setup()
+    arguments = {
+        "maximize": False,
+        "optimisers": OPTIMISERS,
+        "budget": budgets.compare_budget,
+        "budgets": {"bo": budgets.bo_budget} if budgets.bo_budget else None,
+        "seeds": tuple(budgets.compare_seeds),
+        "progress": ctx.progress,
+    }
     with ctx.store() as store:
-        runs = experiments.compare_optimisers(
-            store,
-            ctx.setup(),
-            ctx.metric,
-            maximize=False,
-            optimisers=OPTIMISERS,
-            budget=budgets.compare_budget,
-            budgets={"bo": budgets.bo_budget} if budgets.bo_budget else None,
-            seeds=tuple(budgets.compare_seeds),
-            progress=ctx.progress,
-            resume=True,
-        )
+        runs = experiments.compare_optimisers(store, setup, ctx.metric, resume=True, **arguments)
+        # Figure 7 ranks by each seed's best world, partly luck: rank again on those worlds replayed on fresh episodes
+        confirmed = experiments.confirm_optimisers(store, setup, ctx.metric, repeats=REPEATS, seed=ctx.seed, **arguments)
     figure = comparison_figure(runs, random_scores(ctx), ctx.metric, ctx.layout.figure("comparison"), maximize=False)
     best = {opt: float(np.nanmin(np.concatenate([np.ravel(r) for r in scores]))) for opt, scores in runs.items()}
+    rows = confirmed_efficiency(runs, confirmed, ctx.metric)
+    verdict = ordering(rows, confirmed, ctx.metric)
+    means = ", ".join(f"{row['optimiser']} {row['confirmed_mean']:.4g}" for row in sorted(rows, key=lambda row: row["rank"]))
+    found, selection = ", ".join(f"{opt} {value:.4g}" for opt, value in best.items()), experiments.comparison_selection_name(False, ctx.metric)
     return {
         "store": ctx.layout.rel(ctx.layout.store_path),
         "campaigns": compare_names(ctx, tuple(runs)),
         "best": best,
         "figure": ctx.layout.rel(figure),
-        "summary": "lowest " + ", ".join(f"{opt} {value:.4g}" for opt, value in best.items()),
+        "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": REPEATS, "selection": selection},
+        "confirmed": json_safe(rows),
+        "ordering": json_safe(verdict),
+        "summary": f"lowest found {found}; confirmed ({REPEATS} fresh episodes, mean over seeds) {means}; the paper's ordering: {verdict['verdict']}",
     }
 
 

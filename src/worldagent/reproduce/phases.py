@@ -285,7 +285,7 @@ def strategic_phase(ctx: EnvContext) -> dict:
     """CMA-ES searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b); both worlds confirmed
     on fresh episodes (``analysis.confirm``), found beside confirmed in the outputs."""
     from worldagent import experiments
-    from worldagent.analysis.confirm import REPEATS, agent_key
+    from worldagent.analysis.confirm import agent_key
     from worldagent.influence.statistics import json_safe
     from worldagent.reports.strategic import draw_strategic, strategic_json
 
@@ -300,7 +300,7 @@ def strategic_phase(ctx: EnvContext) -> dict:
             optimiser="cmaes",
             progress=ctx.progress,
             resume=True,
-            confirm=REPEATS,
+            confirm=ctx.preset.confirm,
         )
         randoms = store.evaluations(experiments.campaign_names(ctx.metric, ctx.seed)["random"])
     low, high = result["min"], result["max"]
@@ -313,7 +313,7 @@ def strategic_phase(ctx: EnvContext) -> dict:
         "max": float(high.score),
         "figure": ctx.layout.rel(figure),
         # which stored confirmations are these worlds' (the report re-reads them): the agent, the seed and the repeats
-        "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": REPEATS, "selections": list(result["selections"])},
+        "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": ctx.preset.confirm, "selections": list(result["selections"])},
         "confirmed": json_safe({side: found[side] for side in ("min", "max")}),
         "summary": f"{ctx.metric} ({ctx.budgets.strategic_budget} worlds each): " + strategic_summary(result),
     }
@@ -352,7 +352,7 @@ def compare_phase(ctx: EnvContext) -> dict:
     if budgets.compare_budget < 1:
         return skipped_for_budget(ctx, "compare_budget")
     from worldagent import experiments
-    from worldagent.analysis.confirm import REPEATS, agent_key
+    from worldagent.analysis.confirm import agent_key
     from worldagent.influence.statistics import json_safe
     from worldagent.reports.comparison import comparison_figure, confirmed_efficiency, ordering
 
@@ -368,7 +368,7 @@ def compare_phase(ctx: EnvContext) -> dict:
     with ctx.store() as store:
         runs = experiments.compare_optimisers(store, setup, ctx.metric, resume=True, **arguments)
         # Figure 7 ranks by each seed's best world, partly luck: rank again on those worlds replayed on fresh episodes
-        confirmed = experiments.confirm_optimisers(store, setup, ctx.metric, repeats=REPEATS, seed=ctx.seed, **arguments)
+        confirmed = experiments.confirm_optimisers(store, setup, ctx.metric, repeats=ctx.preset.confirm, seed=ctx.seed, **arguments)
     figure = comparison_figure(runs, random_scores(ctx), ctx.metric, ctx.layout.figure("comparison"), maximize=False)
     best = {opt: float(np.nanmin(np.concatenate([np.ravel(r) for r in scores]))) for opt, scores in runs.items()}
     rows = confirmed_efficiency(runs, confirmed, ctx.metric)
@@ -380,10 +380,10 @@ def compare_phase(ctx: EnvContext) -> dict:
         "campaigns": compare_names(ctx, tuple(runs)),
         "best": best,
         "figure": ctx.layout.rel(figure),
-        "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": REPEATS, "selection": selection},
+        "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": ctx.preset.confirm, "selection": selection},
         "confirmed": json_safe(rows),
         "ordering": json_safe(verdict),
-        "summary": f"lowest found {found}; confirmed ({REPEATS} fresh episodes, mean over seeds) {means}; the paper's ordering: {verdict['verdict']}",
+        "summary": f"lowest found {found}; confirmed ({ctx.preset.confirm} fresh episodes, mean over seeds) {means}; the paper's ordering: {verdict['verdict']}",
     }
 
 
@@ -448,13 +448,21 @@ def atlas_phase(ctx: EnvContext) -> dict:
     if budgets.atlas_budget < 1:
         return skipped_for_budget(ctx, "atlas_budget")
     from worldagent import experiments
-    from worldagent.analysis.confirm import ELITE_REPEATS, agent_key
+    from worldagent.analysis.confirm import agent_key
     from worldagent.reports.atlas import atlas_figure, counterfactual_figure
 
     setup, failure = ctx.setup(), spec.failure or None
     with ctx.store() as store:
         found = experiments.atlas(
-            store, setup, ctx.metric, budget=budgets.atlas_budget, seed=ctx.seed, cells=ATLAS_CELLS, failure=failure, progress=ctx.progress
+            store,
+            setup,
+            ctx.metric,
+            budget=budgets.atlas_budget,
+            seed=ctx.seed,
+            cells=ATLAS_CELLS,
+            failure=failure,
+            progress=ctx.progress,
+            confirm=ctx.preset.elite_confirm,
         )
         loaded = lambda e: (experiments.with_world(store, e), experiments.scored_keys_of(store, e))  # noqa: E731
         figure = atlas_figure(found, setup, ctx.metric, False, loaded, layout.figure("atlas"))
@@ -464,7 +472,7 @@ def atlas_phase(ctx: EnvContext) -> dict:
             "figure": layout.rel(figure),
             "failure": failure,
             # which stored confirmations are the elites' (the report re-reads them): the agent, the seed and the repeats
-            "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": ELITE_REPEATS},
+            "confirmation": {"agent": agent_key(setup), "seed": ctx.seed, "repeats": ctx.preset.elite_confirm},
         }
         if failure:
             explained = experiments.explain_failures(setup, found, experiments.failure_selection(failure, ctx.env), seed=ctx.seed)

@@ -149,6 +149,9 @@ class Preset:
             env by ``check_curriculum`` before any phase runs.
         repair: the repair of every env's G(z) by name (``reproduce --repair``, ``EnvSpec.repairs``,
             e.g. ``open``); None: each env's default (the paper's ``nearest`` for racing and harvest).
+        confirm: fresh episodes each reported world (strategic, compare, influence's selection) is
+            replayed on (``analysis.confirm``; ours, not the paper's: it reports the found figure only).
+        elite_confirm: fresh episodes each atlas elite is replayed on (the corrected archive).
     """
 
     name: str
@@ -162,10 +165,14 @@ class Preset:
     settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     curriculum: Curriculum = field(default_factory=Curriculum)
     repair: str | None = None
+    confirm: int = 64
+    elite_confirm: int = 32
 
     def __post_init__(self):
         if self.repeats < 1 or self.seed < 0:
             raise WorldagentError(f"repeats={self.repeats}, seed={self.seed}; repeats must be >= 1 and the seed >= 0.")
+        if self.confirm < 1 or self.elite_confirm < 1:
+            raise WorldagentError(f"confirm={self.confirm}, elite_confirm={self.elite_confirm}; replay reported worlds on at least 1 episode.")
         if self.algo is not None and not any(self.algo in registry.get(env).algorithms for env in self.envs):
             known = sorted({a for env in self.envs for a in registry.get(env).algorithms})
             raise WorldagentError(f"algorithm {self.algo!r} trains none of {', '.join(self.envs)}; use one of: {', '.join(known)}.")
@@ -348,7 +355,10 @@ def make_curriculum_of(env: str, request: dict, worlds: Any) -> Any:
 
 # name -> (description, settings other than budgets); budgets come from each EnvSpec.presets[name]
 SETTINGS = {
-    "tiny": ("Every phase at a toy budget (CI and tests); the numbers mean nothing.", {"repeats": 2, "vae_hidden": (64, 32), "vae_batch_size": 32}),
+    "tiny": (
+        "Every phase at a toy budget (CI and tests); the numbers mean nothing.",
+        {"repeats": 2, "vae_hidden": (64, 32), "vae_batch_size": 32, "confirm": 4, "elite_confirm": 2},
+    ),
     "quick": ("Small budgets that finish both environments in under 10 minutes on 2 CPU cores and still show every phenomenon.", {}),
     "paper": (
         "The paper's budgets (10,000 worlds, 10,000 / 5,000 training episodes, population 21, 8 repeats, 1,000 random worlds); for a GPU.",

@@ -30,7 +30,7 @@ def picked(tmp_path_factory):
     with registered() as spec, pytest.MonkeyPatch.context() as patch:
         # one-step episodes: play them thousands to a call (the suite's 16 would take thousands of calls)
         patch.setenv("WORLDAGENT_EPISODES_PER_CALL", "4096")
-        patch.setattr(confirmation, "BATCH", 64)
+        patch.setattr(confirmation, "BATCH", (SEEDS + NEVER) // 2)  # two calls of one shape
         setup = experiments.setup(spec.name, "idle", None, repeats=REPEATS)
         rng = np.random.default_rng(50)
         p = np.concatenate([rng.uniform(0.0, 0.6, SEEDS * WORLDS), np.zeros(NEVER * WORLDS)])

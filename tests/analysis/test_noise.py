@@ -77,7 +77,7 @@ def test_edge_cases_no_dice_no_variance_one_world_and_missing_values():
     one = world_share(np.array([[1.0, 2.0, 3.0]]))
     assert np.isnan(one.icc) and one.worlds == 1
     dice_only = world_share(np.tile([0.0, 1.0], (6, 2)))  # every world the same mean: the world explains nothing
-    assert dice_only.icc == pytest.approx(-1 / 3) and dice_only.high < 0.5
+    assert dice_only.icc == 0.0 and dice_only.reliability == 0.0 and dice_only.high < 0.5  # truncated at 0
     with_nan = np.vstack([simulated(np.random.default_rng(0), 0.5, 30, 4), [[np.nan, 1, 2, 3]]])
     assert world_share(with_nan).worlds == 30  # a world with a missing episode is left out
     assert world_share(np.ones((5, 4))).as_dict()["icc"] is None  # NaN as null in JSON

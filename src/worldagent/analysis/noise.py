@@ -5,7 +5,8 @@ every world played ``k`` times (``values[worlds, k]``), a one-way random-effects
 variance splits the outcome's variance into a part between worlds and a part within them:
 
 - **ICC(1)** (Shrout & Fleiss 1979, case 1; McGraw & Wong 1996): the share of one episode's
-  variance that belongs to the world, with the exact F-based 95% interval. When the world explains
+  variance that belongs to the world (truncated at 0), with a 95% percentile-bootstrap interval over
+  worlds (the F interval assumes normal outcomes, which crash penalties are not). When the world explains
   10%, a search over worlds mostly finds luck; the fix is more episodes per world, not more worlds.
 - **Reliability** of a world's score at ``k`` episodes, ICC(1, k) = k·ICC / (1 + (k-1)·ICC)
   (Spearman–Brown): the correlation between two independent k-episode scores of the same worlds.
@@ -23,9 +24,9 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import stats
 
 CONFIDENCE = 0.95
+BOOTSTRAP = 2000  # resamples of the worlds for the share's interval
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,7 @@ class WorldShare:
 
     Attributes:
         icc: ICC(1), the share of one episode's variance between worlds (NaN: no variance at all).
-        low, high: its 95% interval (F-based, exact under normality).
+        low, high: its 95% interval (percentile bootstrap over worlds).
         reliability: ICC(1, k) of a world's mean over ``repeats`` episodes.
         reliability_low, reliability_high: its 95% interval.
         worlds: worlds counted (those with ``repeats`` finite values).
@@ -54,11 +55,26 @@ class WorldShare:
         return {key: (value if not isinstance(value, float) or np.isfinite(value) else None) for key, value in asdict(self).items()}
 
 
-def world_share(values: np.ndarray, confidence: float = CONFIDENCE) -> WorldShare:
+def _mean_squares(means: np.ndarray, variances: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(between, within) mean squares of a one-way ANOVA from each world's mean and variance (last axis: worlds)."""
+    return k * means.var(axis=-1, ddof=1), variances.mean(axis=-1)
+
+
+def _icc(between, within, k: int):
+    """ICC(1) and ICC(1, k) from mean squares, truncated at 0 (a share of variance is not negative)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        icc = (between - within) / (between + (k - 1) * within)
+        reliability = (between - within) / between
+    return np.clip(np.nan_to_num(icc, nan=0.0), 0, 1), np.clip(np.nan_to_num(reliability, nan=0.0), 0, 1)
+
+
+def world_share(values: np.ndarray, confidence: float = CONFIDENCE, resamples: int = BOOTSTRAP) -> WorldShare:
     """ICC(1) and the reliability of a ``k``-episode score from ``values`` f64[worlds, k] (k >= 2).
 
-    Worlds with a non-finite value are left out. All values equal: NaN (nothing to share).
-    No variance within worlds but some between: 1 (the world is everything).
+    The interval is a percentile bootstrap over worlds (``resamples`` draws, a fixed seed): the exact F
+    interval assumes normal outcomes, and racing's rare crashes (returns near -280 among returns near 60)
+    make it far too narrow. Worlds with a non-finite value are left out. All values equal: NaN (nothing to
+    share). No variance within worlds but some between: 1 (the world is everything).
     """
     values = np.asarray(values, np.float64)
     if values.ndim != 2 or values.shape[1] < 2:
@@ -68,20 +84,19 @@ def world_share(values: np.ndarray, confidence: float = CONFIDENCE) -> WorldShar
     nan = float("nan")
     if n < 2:
         return WorldShare(nan, nan, nan, nan, nan, nan, n, k)
-    between = k * values.mean(axis=1).var(ddof=1)  # mean square between worlds
-    within = values.var(axis=1, ddof=1).mean()  # mean square within worlds
+    means, variances = values.mean(axis=1), values.var(axis=1, ddof=1)
+    between, within = _mean_squares(means, variances, k)
     if between <= 0 and within <= 0:
         return WorldShare(nan, nan, nan, nan, nan, nan, n, k)
     if within <= 0:
         return WorldShare(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, n, k)
-    f = between / within
-    df_between, df_within = n - 1, n * (k - 1)
-    tail = (1 + confidence) / 2
-    f_low = f / stats.f.ppf(tail, df_between, df_within)
-    f_high = f * stats.f.ppf(tail, df_within, df_between)
-    icc = lambda ratio: max((ratio - 1) / (ratio + k - 1), -1 / (k - 1))  # noqa: E731
-    reliable = lambda ratio: 1 - 1 / ratio  # noqa: E731
-    return WorldShare(icc(f), icc(f_low), min(icc(f_high), 1.0), reliable(f), reliable(f_low), min(reliable(f_high), 1.0), n, k)
+    icc, reliability = _icc(between, within, k)
+    picks = np.random.default_rng(0).integers(0, n, size=(resamples, n))
+    boot_icc, boot_reliability = _icc(*_mean_squares(means[picks], variances[picks], k), k)
+    tails = [100 * (1 - confidence) / 2, 100 * (1 + confidence) / 2]
+    low, high = np.percentile(boot_icc, tails)
+    r_low, r_high = np.percentile(boot_reliability, tails)
+    return WorldShare(float(icc), float(low), float(high), float(reliability), float(r_low), float(r_high), n, k)
 
 
 def spearman_brown(icc: float, repeats: int) -> float:
@@ -95,7 +110,7 @@ def repeats_for(icc: float, reliability: float = 0.8) -> int | None:
         return None
     if icc >= 1:
         return 1
-    return int(np.ceil(reliability * (1 - icc) / (icc * (1 - reliability))))
+    return int(np.ceil(reliability * (1 - icc) / (icc * (1 - reliability)) - 1e-9))  # 36.0000001 is 36
 
 
 def failing_on_failing_worlds(fails: np.ndarray) -> float:

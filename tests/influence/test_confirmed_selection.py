@@ -129,7 +129,7 @@ def test_the_survivors_are_exactly_the_selected_worlds_confirmed_to_miss_the_goa
     run_dir, result = runs[CONFIRM]
     with RunStore(run_dir, create=False) as store:
         raw, _, _ = select_worlds(store, ["influence-candidates"], SELECT, toy.name)
-        fresh = {c.world: c.episodes for c in store.confirmations(env=toy.name)}
+        fresh = {c.world: c.episodes for c in store.confirmations(env=toy.name) if c.seed == 0}  # the run's seed: the selection's
         picked = [s.world for s in store.selections(f"influence:{SELECT}")]
     raw_digests = digests(raw, toy)
     assert picked == raw_digests and set(fresh) == set(raw_digests)  # every raw pick replayed once, with provenance
@@ -219,3 +219,27 @@ def test_a_negative_confirm_exits_2_with_one_line(tmp_path, toy):
     with pytest.raises(WorldagentError, match=r"confirm=-1; .*--confirm"):
         run_influence(tmp_path, toy, None, None, None, None, SELECT, episodes=8, confirm=-1)  # before anything loads
     assert not (tmp_path / "store.sqlite").exists()
+
+
+@pytest.mark.slow  # shares the two influence runs above
+def test_every_trained_agent_replays_the_kept_worlds_under_its_own_identity(runs, toy, toy_generator):
+    from worldagent.influence.confirmation import REPLAY_SEED_OFFSET, trained_on_selected
+
+    run_dir, result = runs[CONFIRM]
+    chosen = setup(toy.name, "random", toy_generator, repeats=2)
+    events = {"selection": parse_selection(SELECT, toy.name).resolve(toy.name)}
+    replayed = trained_on_selected(run_dir, chosen, result, events, repeats=3, progress=False)
+    kept = result["worlds"]["selected"]
+    assert (replayed["worlds"], replayed["repeats"], replayed["seed"]) == (kept, 3, REPLAY_SEED_OFFSET)
+    with RunStore(run_dir, create=False) as store:
+        rows = [c for c in store.confirmations(env=toy.name) if c.seed == REPLAY_SEED_OFFSET]
+    assert len(rows) == 2 * kept and len({c.agent for c in rows}) == 2  # default-s0 and influenced-s0, each its own rows
+    by_agent: dict[str, list[float]] = {}
+    for c in rows:
+        by_agent.setdefault(c.agent, []).append(1 - metric_values(c.episodes, "reached").mean())  # the share missing the goal
+    measured = sorted(float(np.mean(v)) for v in by_agent.values())
+    reported = sorted(replayed["per_seed"][label]["0"]["selection"] for label in ("default", "influenced"))
+    assert reported == pytest.approx(measured)
+    assert set(replayed["per_seed"]["default"]["0"]) == {"selection", "return", "reached"}
+    pooled = replayed["pooled"]["selection"]
+    assert pooled["difference"] == pytest.approx(pooled["arm"] - pooled["base"]) and pooled["worlds"] == kept

@@ -181,9 +181,9 @@ def trained_on_selected(
     import dataclasses
     from pathlib import Path
 
+    from worldagent.agents.loaders import load_agent
     from worldagent.analysis.diff import pooled_difference
     from worldagent.influence.cache import load_influenced_worlds
-    from worldagent.influence.experiment import trained_policies
     from worldagent.store import Evaluation, RunStore
 
     spec, run_dir = setup.spec, Path(run_dir)
@@ -198,7 +198,11 @@ def trained_on_selected(
     dirs = {name: run_dir / "agents" / name / record["policy"] for name, record in result["agents"].items()}
     values: dict[str, dict[str, dict[str, np.ndarray]]] = {}
     with RunStore(run_dir) as store:
-        for name, policy in trained_policies(dirs, spec, greedy).items():
+        for name, directory in dirs.items():
+            # each loaded as a saved agent (``load_agent``: with its source, the hash of its files): a confirmation is
+            # stored under its agent's identity, which a bare ``load_policy`` or ``trained_policies``' shared ``act``
+            # would make one for every trained agent (and read the first one's episodes back for all)
+            policy = load_agent(spec, str(directory), options=setup.options, greedy=greedy)
             played = confirm(
                 store,
                 dataclasses.replace(setup, policy=policy),

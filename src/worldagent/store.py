@@ -174,6 +174,8 @@ def agent_identity(record: dict) -> list:
     kind, path, sha256 = record.get("kind"), record.get("path") or "", record.get("sha256")
     if kind == "callable":
         return [kind, path.partition(":")[2], sha256 or path]
+    if kind == "python":  # built in Python: its name and its parameters' hash
+        return [kind, path, sha256]
     return [kind, sha256 or path]
 
 

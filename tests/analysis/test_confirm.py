@@ -135,6 +135,17 @@ def test_two_functions_of_one_module_are_two_agents():
     assert agent_identity(saved) == agent_identity({**saved, "path": "/elsewhere/run"})  # moved, same files
 
 
+def test_agents_built_in_python_are_known_by_their_parameters_too():
+    import jax.numpy as jnp
+
+    from worldagent.agents.policy import Policy, agent_record
+
+    act = lambda params, obs, key, state: jnp.argmax(params @ obs)  # noqa: E731
+    one, other = Policy(jnp.eye(2), act, name="trained"), Policy(2 * jnp.eye(2), act, name="trained")
+    assert agent_identity(agent_record(one)) != agent_identity(agent_record(other))
+    assert agent_identity(agent_record(one)) == agent_identity(agent_record(Policy(jnp.eye(2), act, name="trained")))
+
+
 def test_summary_counts_distinct_worlds_and_confirmed_failures(tmp_path, racing):
     with RunStore(tmp_path) as store:
         found = experiments.random_evaluation(store, racing, "return", worlds=6, seed=0, progress=False)

@@ -29,6 +29,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from worldagent.agents.networks import initial_memory
@@ -55,9 +56,23 @@ class AgentSource:
 
 
 def agent_record(policy: Any) -> dict:
-    """What ``policy`` is, as campaigns record it: its ``source``, or its name for agents built in Python."""
-    source = getattr(policy, "source", None) or AgentSource("python", str(getattr(policy, "name", type(policy).__name__)))
+    """What ``policy`` is, as campaigns record it: its ``source``; for agents built in Python, their name and a hash
+    of their parameters (two trained agents of one name are two agents: DESIGN.md "Identity")."""
+    source = getattr(policy, "source", None)
+    if source is None:
+        params = getattr(policy, "params", None)
+        source = AgentSource("python", str(getattr(policy, "name", type(policy).__name__)), params_hash(params) if params is not None else None)
     return source.record()
+
+
+def params_hash(params: Any) -> str:
+    """sha256 over a parameter pytree's leaves (shapes, dtypes and bytes, in tree order)."""
+    digest = hashlib.sha256()
+    for leaf in jax.tree_util.tree_leaves(params):
+        value = np.ascontiguousarray(np.asarray(leaf))
+        digest.update(f"{value.dtype.str}{value.shape}".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
 
 
 def file_hash(*paths: Path) -> str:

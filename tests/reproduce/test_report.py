@@ -16,6 +16,7 @@ from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reports.html import SECTIONS, build_report
 from worldagent.reproduce.manifest import Manifest
+from worldagent.reproduce.presets import get_preset
 from worldagent.store import RunStore, world_digest
 
 
@@ -193,9 +194,11 @@ def test_the_failure_atlas_section_is_recomputed_from_the_store(racing_run):
         if tuple(index) not in elites or evaluation.score < elites[tuple(index)].score:
             elites[tuple(index)] = evaluation  # each cell's lowest return, the earliest on ties
     failing = [e for e in atlas if episode_mean(e, "crashed") > 0.5]
-    # the corrected archive: every elite's stored confirmation (32 fresh episodes), a crash rate beyond 0.5 by its exact interval
+    # the corrected archive: every elite's stored confirmation (the preset's elite_confirm fresh episodes), a crash rate
+    # beyond 0.5 by its exact interval
+    repeats = get_preset("tiny").elite_confirm
     with RunStore(out / "racing" / "store.sqlite", create=False) as store:
-        fresh = {c.world: [float(e["crashed"]) for e in c.episodes] for c in store.confirmations() if c.repeats == 32}
+        fresh = {c.world: [float(e["crashed"]) for e in c.episodes] for c in store.confirmations() if c.repeats == repeats}
     crashes = [fresh[world_digest(e.world)] for e in elites.values()]
     assert shown["racing.atlas.found.failing_cells"] == sum(episode_mean(e, "crashed") > 0.5 for e in elites.values())
     assert shown["racing.atlas.confirmed.failing_cells"] == sum(beta.ppf(0.025, sum(c), len(c) - sum(c) + 1) > 0.5 for c in crashes if sum(c))

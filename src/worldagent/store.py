@@ -187,6 +187,9 @@ def _resumable(have: dict, wanted: dict) -> tuple[dict, dict]:
         wanted = {k: v for k, v in wanted.items() if k != "stream"}
     if "agent" not in have:
         return have, {k: v for k, v in wanted.items() if k != "agent"}
+    before, after = have.get("agent") or {}, wanted.get("agent") or {}
+    if before.get("kind") == after.get("kind") == "python" and not before.get("sha256"):  # recorded before parameters were hashed
+        wanted = {**wanted, "agent": {**after, "sha256": None}}
     same = lambda agent: agent and agent_identity(agent)  # noqa: E731
     return {**have, "agent": same(have.get("agent"))}, {**wanted, "agent": same(wanted.get("agent"))}
 

@@ -156,3 +156,26 @@ def test_summary_counts_distinct_worlds_and_confirmed_failures(tmp_path, racing)
     assert summary["picked"] == 4 and summary["distinct_worlds"] == len({c.digest for c in confirmed}) <= 3
     assert summary["found_failing"] == summary["distinct_worlds"] and summary["confirmation_episodes"] == 4 * summary["distinct_worlds"]
     assert summary["confirmed_failing"] == summary["distinct_worlds"]
+
+
+def test_a_campaign_of_an_agent_recorded_before_parameters_were_hashed_resumes(tmp_path):
+    def evaluate(z, seeds):
+        return [Outcome(float(s), [{"cost": float(s)}]) for s in seeds]
+
+    old = {"kind": "python", "path": "trained", "sha256": None}
+    new = {**old, "sha256": "ab12"}
+    with RunStore(tmp_path) as store:
+        run_campaign(store, CampaignSpec("c", "racing", "cost", False, "random", 6, 0, 3, SMALL, agent=old), evaluate, progress=False)
+        again = run_campaign(
+            store, CampaignSpec("c", "racing", "cost", False, "random", 12, 0, 3, SMALL, agent=new), evaluate, resume=True, progress=False
+        )
+        assert len(again) == 12
+        with pytest.raises(Exception, match="other settings"):  # a hashed agent is not resumed by another one
+            run_campaign(store, CampaignSpec("d", "racing", "cost", False, "random", 6, 0, 3, SMALL, agent=new), evaluate, progress=False)
+            run_campaign(
+                store,
+                CampaignSpec("d", "racing", "cost", False, "random", 6, 0, 3, SMALL, agent={**new, "sha256": "cd34"}),
+                evaluate,
+                resume=True,
+                progress=False,
+            )

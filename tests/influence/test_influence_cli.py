@@ -74,6 +74,8 @@ def test_a_whole_racing_run_prints_the_table_and_writes_figure_and_json(tmp_path
         "4",
         "--repeats",
         "1",
+        "--confirm",
+        "0",  # the CLI wrapper's table and files; confirmed selection has tests of its own (test_confirmed_selection.py)
         "--out",
         str(out),
         "--quiet",

@@ -250,3 +250,11 @@ def test_the_commands_print_found_beside_confirmed_and_zero_skips(toy, generator
     assert [row["confirmation_episodes"] for row in table["confirmed"]] == [2 * 64, 2 * 64]
     assert table["ordering"]["text"] in compared and (tmp_path / "compare" / "comparison-confirmed.csv").is_file()
     assert "| optimiser | rank (confirmed) |" in (tmp_path / "compare" / "comparison.md").read_text()
+
+
+def test_one_seed_cannot_order_the_optimisers():
+    runs, confirmed = confirmed_runs({"cmaes": [10], "bo": [-20], "random": [30]})
+    rows = confirmed_efficiency(runs, confirmed, "return")
+    found = ordering(rows, confirmed, "return")
+    assert any(pair["verdict"] == "reversed" for pair in found["pairs"])  # these two worlds differ beyond doubt...
+    assert found["verdict"] == "cannot tell" and "not the optimisers" in found["text"]  # ...which says nothing of the optimisers

@@ -348,6 +348,8 @@ def ordering(confirmed_rows: list[dict], confirmed: dict[str, list], metric: str
         result["pairs"].append({"better": better, "worse": worse, **_pair_difference(confirmed[better], confirmed[worse], metric, maximize)})
     verdicts = [pair["verdict"] for pair in result["pairs"]]
     result["verdict"] = "survives" if all(v == "holds" for v in verdicts) else "contradicted" if "reversed" in verdicts else "cannot tell"
+    if min(by_name[name]["seeds"] for name in paper) < 2:  # one seed compares the reported worlds, not the optimisers
+        result["verdict"] = "cannot tell"
     result["text"] = _ordering_text(result, by_name, metric, maximize)
     return result
 
@@ -371,6 +373,8 @@ def _ordering_text(result: dict, by_name: dict, metric: str, maximize: bool) -> 
         "contradicted": f"On {basis} the paper's ordering ({claim}) does not survive: a pair is reversed beyond its interval",
         "cannot tell": f"On {basis} the intervals cannot tell whether the paper's ordering ({claim}) holds",
     }[result["verdict"]]
+    if any(pair["over"] == "episodes" for pair in result["pairs"]):
+        head += " (with one seed the intervals compare the reported worlds, not the optimisers)"
     orders = lambda names, key: ", ".join(f"{n} {by_name[n][key]:.4g}" for n in names)  # noqa: E731
     return (
         f"{head}: {pairs}. Confirmed means rank them {orders(result['confirmed_order'], 'confirmed_mean')}; "

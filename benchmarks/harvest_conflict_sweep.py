@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -65,7 +66,7 @@ def run(name: str, extra: dict, episodes: int, seed: int) -> dict:
     options = SPEC.check_options({"tagger": (0,), **{k: v for k, v in extra.items() if k != "map_size"}})
     env, params = SPEC.make_env(options)
     config = training_config(SPEC, "dqn", episodes=episodes)
-    out = Path(f"/tmp/worldagent-sweep/{name}-{episodes}-{seed}")
+    out = Path(tempfile.gettempdir()) / "worldagent-sweep" / f"{name}-{episodes}-{seed}"
     start = time.perf_counter()
     result = train(SPEC, "dqn", config, pool, out, seed=seed, options=options, progress=False, resume=True)
     wall = time.perf_counter() - start

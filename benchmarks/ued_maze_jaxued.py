@@ -46,7 +46,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import RESULTS, describe_machine  # noqa: E402
 
-DEFAULT_JAXUED = "/work/.mirror/DramaCow+jaxued/repo"
 SCRIPTS = {"dr": "maze_dr.py", "plr": "maze_plr.py", "accel": "maze_plr.py"}
 ARM_FLAGS = {"dr": [], "plr": [], "accel": ["--use_accel"]}
 
@@ -300,7 +299,7 @@ def markdown_table(result: dict) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--jaxued", default=DEFAULT_JAXUED, help="a jaxued git checkout or snapshot")
+    parser.add_argument("--jaxued", help="a jaxued git checkout or snapshot (git clone https://github.com/DramaCow/jaxued, commit 0f8f128)")
     parser.add_argument("--arms", nargs="+", default=["dr", "plr", "accel"], choices=list(SCRIPTS))
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--num-updates", type=int, help="their --num_updates, every arm (required to run)")
@@ -316,6 +315,8 @@ def main() -> None:
         return
     if args.num_updates is None:
         parser.error("--num-updates is required to run")
+    if args.jaxued is None:
+        parser.error("--jaxued is required to run: a jaxued checkout (git clone https://github.com/DramaCow/jaxued; commit 0f8f128)")
     args.eval_freq = args.eval_freq or args.num_updates
     if args.num_updates % args.eval_freq:
         # Their loop runs num_updates // eval_freq chunks: a remainder would silently not train.

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from killed_backend import DiesAfter
 from worldagent import differential
 from worldagent.agents.policy import Policy
 from worldagent.cli import app
@@ -19,7 +20,6 @@ from worldagent.envs import registry
 from worldagent.envs.racing.driver import DriverParams, driver_action
 from worldagent.envs.racing.env import ACTION_DIRECTIONS
 from worldagent.errors import WorldagentError
-from worldagent.evaluation.backends import LocalBackend
 from worldagent.store import Evaluation, RunStore
 
 runner = CliRunner()
@@ -175,20 +175,6 @@ def test_a_search_counts_distinct_regressed_worlds_not_evaluations():
     summary = search_summary(found, SPEC, event, "return", False)
     assert summary["regressed_evaluations"] == 3 and summary["regressed"] == 2
     assert sorted(row["slot"] for row in summary["regressed_worlds"]) == [0, 3]  # one row per distinct world, its first evaluation
-
-
-class DiesAfter(LocalBackend):
-    """A backend whose process is 'killed' after ``batches`` batches."""
-
-    def __init__(self, batches: int):
-        self.left = batches
-
-    def run(self, evaluate, batches):
-        for item in super().run(evaluate, batches):
-            if self.left == 0:
-                raise KeyboardInterrupt
-            self.left -= 1
-            yield item
 
 
 def test_a_killed_confirmation_of_both_agents_resumes_to_identical_rows(racing_generator, tmp_path, monkeypatch):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from killed_backend import DiesAfter
 from worldagent import experiments
 from worldagent.analysis.confirm import (
     Interval,
@@ -15,7 +16,6 @@ from worldagent.analysis.confirm import (
     confirmed_summary,
     mean_interval,
 )
-from worldagent.evaluation.backends import LocalBackend
 from worldagent.events import parse_selection
 from worldagent.search.campaign import CampaignSpec, Outcome, evaluation_seed, run_campaign, stored_seed
 from worldagent.search.objectives import search_keys
@@ -53,20 +53,6 @@ def test_confirmation_keys_are_disjoint_from_every_search_key_and_repeat_for_the
         assert again[0].episodes == confirmed[0].episodes and len(store.confirmations()) == len({c.digest for c in confirmed})
         assert [s.name for s in store.selections()] == ["test", "test", "other"]
         assert confirmed[0].found("return").mean == pytest.approx(picks[0].score) and confirmed[0].confirmed("return").n == 16
-
-
-class DiesAfter(LocalBackend):
-    """A backend whose process is 'killed' after ``batches`` batches."""
-
-    def __init__(self, batches: int):
-        self.left = batches
-
-    def run(self, evaluate, batches):
-        for item in super().run(evaluate, batches):
-            if self.left == 0:
-                raise KeyboardInterrupt
-            self.left -= 1
-            yield item
 
 
 def test_a_killed_confirmation_resumes_to_the_rows_of_an_uninterrupted_one(tmp_path, racing, monkeypatch):

@@ -6,7 +6,7 @@ On a machine with an NVIDIA GPU, from the repository root, with ``.whl/`` made h
     python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \\
       && export PYTHONPATH=/tmp/site:src PYTHONUNBUFFERED=1 || exit; python3 benchmarks/device_check.py --out "$OUT"
 
-On CPU, in CI (tiny sizes, under a minute on 2 cores; the values are CPU values and say so)::
+On CPU, in CI (tiny sizes, under 2.5 minutes on 2 cores; the values are CPU values and say so)::
 
     python benchmarks/device_check.py --smoke --out /tmp/device-smoke
 
@@ -54,9 +54,10 @@ SIZES_VARIABLE = "WORLDAGENT_DEVICE_SIZES"  # device_sections.SIZES_VARIABLE (no
 SECTIONS = ("machine", "env_throughput", "many_runs", "decode_search", "quick")
 CAPS = {  # seconds per section; None: whatever is left
     "full": {"machine": 30, "env_throughput": 60, "many_runs": 220, "decode_search": 80, "quick": None},
-    "smoke": {"machine": 4, "env_throughput": 10, "many_runs": 24, "decode_search": 15, "quick": 5},
+    # smoke: what each section needs on 2 busy CPU cores (decode_search trains its tiny agent and G(z): 44 s measured)
+    "smoke": {"machine": 4, "env_throughput": 30, "many_runs": 30, "decode_search": 60, "quick": 10},
 }
-BUDGET = {"full": 470, "smoke": 60}  # seconds in all: the 8 minutes, less the start
+BUDGET = {"full": 470, "smoke": 140}  # seconds in all: the 8 minutes, less the start
 SHORTEST = {"full": 20, "smoke": 3}  # a section given less than this is skipped with a note
 RECORDS = {  # what each section must record under --smoke (CI): a section that loses one fails the check
     "machine": ("jax",),
@@ -209,9 +210,9 @@ def sizes_set(text: str) -> tuple[str, object]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--smoke", action="store_true", help="tiny sizes, under a minute on 2 CPU cores (CI)")
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes, under 2.5 minutes on 2 CPU cores (CI)")
     parser.add_argument("--out", type=Path, default=HERE / "results", help="folder of the JSON and the log (default benchmarks/results)")
-    parser.add_argument("--budget", type=float, default=None, help="seconds in all (default 470; --smoke 60)")
+    parser.add_argument("--budget", type=float, default=None, help="seconds in all (default 470; --smoke 140)")
     parser.add_argument("--sections", nargs="+", choices=SECTIONS, default=list(SECTIONS), help="run only these (the others are recorded as skipped)")
     parser.add_argument(
         "--set", nargs="+", default=[], metavar="NAME=JSON", help="change a size of device_sections.SIZES, e.g. seeds=[5] 'algos=[\"ppo\"]'"

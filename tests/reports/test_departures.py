@@ -1,4 +1,5 @@
-"""The report's first box: where a run departs from the paper, each gap's likely cause and section; one seed said as such."""
+"""The report's first box: where a run departs from the paper, each gap's possible causes (only what the run's own record
+shows: settings unlike the paper preset, the generator's gate warnings) and section; one seed said as such."""
 
 from __future__ import annotations
 
@@ -6,8 +7,9 @@ import re
 
 import pytest
 
-from worldagent.reports.departures import departures, departures_section, differs
+from worldagent.reports.departures import departures, departures_section, differs, likely_cause, paper_config, run_differences
 from worldagent.reports.results import Headline, influence_headlines
+from worldagent.runs import PHASES
 
 
 @pytest.mark.parametrize(
@@ -64,3 +66,63 @@ def test_the_box_says_the_preset_the_gaps_and_what_one_seed_cannot_show():
     (note,) = re.findall(r"<li data-flag='one-seed'>(.*?)</li>", box)
     assert "equality 0.671 → 0.659" in note and "cannot show which way" in note
     assert "data-flag='one-seed'" not in departures_section(rows, harvest_results(seeds=(0, 1, 2)), "paper")
+
+
+CRASHED = Headline("racing.random.crashed", "Racing: random worlds, crashed", 0.0526, 0.11)
+OVERFIT = "overfit: held-out reconstruction no better than the mean world (NLL 207.1 vs 177.5 nats per world)"
+
+
+def racing_as_paper(**changes):
+    """A racing run whose every phase recorded the paper preset's config, with ``{phase: {field: value}}`` changed."""
+    phases = {phase: {"status": "done", "config": {**paper_config("racing", phase), **changes.get(phase, {})}} for phase in PHASES}
+    return {"racing": {"phases": phases}}
+
+
+def test_a_run_with_the_paper_settings_may_call_a_gap_real():
+    results = racing_as_paper()
+    assert run_differences("racing", results["racing"]) == []
+    cause = likely_cause(CRASHED, results)
+    assert "unexplained" in cause and "real difference" in cause and "the paper's:" not in cause
+    assert "every setting its phases recorded matches the paper's preset" in departures_section([CRASHED], results, "paper")
+
+
+def test_each_setting_unlike_the_papers_is_named_and_the_gap_is_not_called_real():
+    """The quick run's case: PPO on the route observation and a 10-epoch VAE, against ACKTR on rays and 25 epochs."""
+    results = racing_as_paper(generator={"epochs": 10}, agent={"algo": "ppo", "options": {"observation": "route"}})
+    cause = likely_cause(CRASHED, results)
+    assert "10 VAE epochs (the paper's: 25)" in cause
+    assert "training algorithm ppo (the paper's: acktr)" in cause
+    assert "env option observation route (the paper's: rays)" in cause
+    assert "real difference" not in cause
+    # a setting the number does not depend on is listed in the box, not given as this number's cause
+    results = racing_as_paper(strategic={"budget": 420})
+    assert "420 worlds searched" not in likely_cause(CRASHED, results)
+    assert "420 worlds searched" in likely_cause(Headline("racing.min.normalised", "min", 0.37, 0.13), results)
+    box = departures_section([CRASHED], results, "quick")
+    assert "1 of its settings differs" in box and "data-setting='racing/strategic/budget'" in box
+
+
+def test_an_omitted_option_is_the_envs_default_and_repeats_count():
+    """The quick preset records no options for racing (route, the default) where the paper's records rays; repeats are compared too."""
+    phases = racing_as_paper(random={"repeats": 2})["racing"]["phases"]
+    phases["agent"]["config"].pop("options")
+    found = {(d.phase, d.name): (d.ours, d.paper) for d in run_differences("racing", {"phases": phases})}
+    assert found == {("agent", "options.observation"): ("route", "rays"), ("random", "repeats"): (2, 8)}
+
+
+def test_a_phase_without_recorded_settings_leaves_the_gap_unexplained():
+    results = racing_as_paper()
+    results["racing"]["phases"]["generator"]["config"] = {}
+    cause = likely_cause(CRASHED, results)
+    assert cause.startswith("unexplained: the generator phase recorded no settings") and "real difference" not in cause
+
+
+def test_the_generators_gate_warnings_join_the_box_and_the_causes():
+    results = racing_as_paper()
+    results["racing"]["phases"]["generator"]["outputs"] = {"warnings": [OVERFIT]}
+    results["racing"]["quality"] = {"warnings": [OVERFIT, "collapsed: 0 of 10 latent dimensions active"]}
+    box = departures_section([CRASHED], results, "paper")
+    flagged = re.findall(r"<li data-flag='generator-warning' data-env='racing'>(.*?)</li>", box)
+    assert len(flagged) == 2 and "NLL 207.1 vs 177.5" in flagged[0] and "collapsed" in flagged[1]
+    cause = likely_cause(CRASHED, results)
+    assert "the generator failed its own gate (overfit)" in cause and "(collapsed)" in cause and "real difference" not in cause

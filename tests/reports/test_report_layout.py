@@ -62,7 +62,10 @@ def test_the_generators_warnings_and_latent_figures_are_shown(tmp_path):
     quality["racing"]["latent"] = {"kl_total": 0.0087, "active_units": 0, "kl_per_dim": [0.00087] * 10}
     quality["racing"]["sensitivity"] = {"mean_changed_world_share": 0.0}
     path.write_text(json.dumps(quality))
-    generator = build_report(run).read_text().split('<section id="generator">')[1].split("</section>")[0]
+    page = build_report(run).read_text()
+    generator = page.split('<section id="generator">')[1].split("</section>")[0]
     assert "<ul class='warning'><li>collapsed: 0 of 10" in generator and "--free-bits" in generator
+    departures = page.split('<section id="departures">')[1].split("</section>")[0]  # said first, not only deep in the page
+    assert "data-flag='generator-warning' data-env='racing'>racing: the generator failed its own gate: collapsed: 0 of 10" in departures
     assert "<td>latent: KL, nats (active units)</td><td>0.0087 (0 of 10)</td>" in generator
     assert "<td>worlds changed by a ±1 move along z</td><td>0</td>" in generator

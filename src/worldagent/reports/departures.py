@@ -1,14 +1,21 @@
-"""Where a run departs from the paper: the headline numbers that disagree, each with its likely cause.
+"""Where a run departs from the paper: the headline numbers that disagree, each with the causes the run's own record shows.
 
 The report opens with this box (``departures_section``), so a reader sees first which of the paper's
-numbers this run did not reproduce, and why it probably did not: budgets below the paper's (read from the
-run's own phase configs against the env's ``paper`` preset), a normalisation the paper does not spell
-out, or too few seeds to read a direction from. Each gap links to the section that holds its numbers.
+numbers this run did not reproduce, and what may have caused it. Causes come only from facts the run
+recorded: every setting of its phases' configs (``manifest.json``) that differs from the env's
+``paper`` preset (``setting_differences``, the one place that computes "what differs from the paper":
+algorithm, env options such as racing's observation, VAE epochs, training episodes, budgets, repeats,
+seeds, repair), the generator's own gate warnings (``worldagent.worlds.quality.diagnose``), a
+normalisation the paper does not spell out, and one seed per arm. A number is called a real
+difference only when none of these applies; each gap links to the section that holds its numbers.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -16,30 +23,93 @@ from worldagent.envs import registry
 from worldagent.reports.noise import share_note
 from worldagent.reports.page import esc, fmt
 from worldagent.reports.results import Headline
+from worldagent.reproduce.phases import DEPENDS
+from worldagent.reproduce.presets import EnvBudgets, get_preset
 
-PAPER_REPEATS = 8  # episodes per world in every evaluation of the paper (§6)
 RELATIVE_GAP = 0.25  # ours differs when it is off by more than a quarter of the paper's value ...
 ABSOLUTE_GAP = 0.05  # ... and by more than this (rates and normalised rewards live in [0, 1])
-# (phase, its config field, the env's paper-preset budget, what it counts): the budgets a gap may come from.
-BUDGETS = {
-    "random": (("agent", "episodes", "episodes", "training episodes"), ("random", "worlds", "random_worlds", "random worlds")),
-    "strategic": (("agent", "episodes", "episodes", "training episodes"), ("strategic", "budget", "strategic_budget", "worlds searched")),
-    "influence": (
-        ("influence", "seeds", "influence_seeds", "seeds per arm"),
-        ("influence", "episodes", "influence_episodes", "training episodes per agent"),
-        ("influence", "eval_worlds", "influence_eval_worlds", "evaluation worlds"),
-    ),
-}
 SECTION = {"random": "random", "min": "strategic", "max": "strategic", "influence": "influence"}
+UNRECORDED = "(none recorded)"
+# (phase, config field) -> (words, counted): counted settings read "1,000 training episodes", the others "algorithm ppo".
+WORDS = {
+    ("dataset", "worlds"): ("dataset worlds", True),
+    ("generator", "epochs"): ("VAE epochs", True),
+    ("generator", "hidden"): ("VAE hidden widths", False),
+    ("generator", "batch_size"): ("VAE batch size", False),
+    ("generator", "repair"): ("repair of G(z)", False),
+    ("agent", "algo"): ("training algorithm", False),
+    ("agent", "episodes"): ("training episodes", True),
+    ("agent", "train_envs"): ("environments stepped in parallel (0: the algorithm's default)", False),
+    ("agent", "learning_starts"): ("transitions before learning starts", False),
+    ("random", "worlds"): ("random worlds", True),
+    ("strategic", "budget"): ("worlds searched", True),
+    ("compare", "budget"): ("worlds per optimiser and seed", True),
+    ("compare", "bo_budget"): ("worlds per Bayesian-optimisation seed", True),
+    ("compare", "seeds"): ("seeds per optimiser", True),
+    ("influence", "candidates"): ("candidate worlds", True),
+    ("influence", "episodes"): ("training episodes per agent", True),
+    ("influence", "eval_worlds"): ("evaluation worlds", True),
+    ("influence", "seeds"): ("seeds per arm", True),
+    ("influence", "search_budget"): ("extra search evaluations", True),
+    ("influence", "algo"): ("training algorithm", False),
+    ("atlas", "budget"): ("atlas worlds", True),
+    ("atlas", "failure_worlds"): ("worlds per failure-rate estimate", True),
+}
+NESTED = {"options": "env option", "settings": "training setting", "curriculum": "curriculum"}  # a dotted name's first part, said
+IGNORED = ("seed",)  # the paper preset's seed is ours, not the paper's: a different seed departs from nothing
 
 
 @dataclass(frozen=True)
 class Departure:
-    """One headline number that disagrees with the paper's, why it probably does, and where to read more."""
+    """One headline number that disagrees with the paper's, what may cause it, and where to read more."""
 
     row: Headline
     cause: str
     anchor: str
+
+
+@dataclass(frozen=True)
+class SettingDifference:
+    """One setting of a run's phase that differs from the env's ``paper`` preset.
+
+    Attributes:
+        phase: the phase whose config holds it (``agent``, ``generator``, ...).
+        name: its field, dotted where nested (``options.observation``).
+        ours: the run's recorded value; ``paper``: the paper preset's (``UNRECORDED`` where one side has none).
+    """
+
+    phase: str
+    name: str
+    ours: Any
+    paper: Any
+
+    @property
+    def counted(self) -> bool:
+        return WORDS.get((self.phase, self.name), ("", False))[1]
+
+    @property
+    def words(self) -> str:
+        """What the setting is, in words (``WORDS``; else its name, ``options.observation`` as "env option observation")."""
+        if (self.phase, self.name) in WORDS:
+            return WORDS[(self.phase, self.name)][0]
+        head, _, rest = self.name.partition(".")
+        return f"{NESTED.get(head, head)} {rest}".strip().replace("_", " ") if rest else self.name.replace("_", " ")
+
+    def shown(self, value: Any) -> str:
+        """A value as the text says it: a counted list by its length, None as "the default", lists space-separated."""
+        if value is None:
+            return "the default"
+        if isinstance(value, (list, tuple)):
+            return f"{len(value):,}" if self.counted else (" ".join(self.shown(v) for v in value) or "none")
+        if isinstance(value, dict):
+            return ", ".join(f"{k} {self.shown(v)}" for k, v in value.items()) or "none"
+        return fmt(value)
+
+    def text(self) -> str:
+        """ "1,000 training episodes (the paper's: 5,000)", or "training algorithm ppo (the paper's: acktr)"."""
+        ours, theirs = self.shown(self.ours), self.shown(self.paper)
+        said = f"{ours} {self.words}" if self.counted and self.ours is not None else f"{self.words} {ours}"
+        return f"{said} (the paper's: {theirs})"
 
 
 def differs(ours: float | None, paper: float | None) -> bool:
@@ -63,37 +133,106 @@ def seeds_of(res: dict) -> int | None:
     return len(config["seeds"]) if "seeds" in config else None
 
 
-def smaller_budgets(res: dict, env: str, kind: str) -> list[str]:
-    """ "64 training episodes (the paper's: 10,000)", for each budget of ``kind`` below the paper's preset (one seed is said apart)."""
-    paper = registry.get(env).presets.get("paper", {})
+def paper_config(env: str, phase: str) -> dict | None:
+    """The config ``phase`` of ``env`` would record at the ``paper`` preset (``Preset.phase_config``); None: the env has no paper preset."""
+    if "paper" not in registry.get(env).presets:
+        return None
+    return get_preset("paper").phase_config(env, phase)
+
+
+def with_defaults(env: str, phase: str, config: dict) -> dict:
+    """``config`` as JSON holds it, with what a phase leaves out when it is the default written in: every env option
+    (``spec.check_options``), the env's default repair, the influence search's default."""
+    spec, filled = registry.get(env), dict(config)
+    if phase == "agent":
+        filled["options"] = spec.check_options(filled.get("options") or {})
+    if phase == "generator":
+        filled.setdefault("repair", spec.default_repair)
+    if phase == "influence":
+        filled.setdefault("search", {f.name: f.default for f in dataclasses.fields(EnvBudgets)}["influence_search"])
+    return json.loads(json.dumps(filled, default=list))
+
+
+def flat(config: dict, prefix: str = "") -> dict[str, Any]:
+    """{"options.observation": "rays", ...}: nested settings dotted, so each is compared and named on its own."""
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        if isinstance(value, dict) and value:
+            out.update(flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def setting_differences(env: str, phase: str, recorded: dict) -> list[SettingDifference]:
+    """Every setting of ``phase``'s recorded config that differs from the env's paper preset (empty: none, or no paper preset)."""
+    theirs = paper_config(env, phase)
+    if theirs is None or not recorded:
+        return []
+    ours, theirs = flat(with_defaults(env, phase, recorded)), flat(with_defaults(env, phase, theirs))
+    names = [name for name in dict.fromkeys([*theirs, *ours]) if name not in IGNORED]
+    return [
+        SettingDifference(phase, name, ours.get(name, UNRECORDED), theirs.get(name, UNRECORDED))
+        for name in names
+        if ours.get(name, UNRECORDED) != theirs.get(name, UNRECORDED)
+    ]
+
+
+def run_differences(env: str, res: dict) -> list[SettingDifference]:
+    """Every setting of every recorded phase of ``env`` that differs from its paper preset, in pipeline order."""
+    return [d for phase, entry in res["phases"].items() if phase in DEPENDS for d in setting_differences(env, phase, entry.get("config") or {})]
+
+
+def phases_behind(phase: str) -> list[str]:
+    """``phase`` and every phase it is computed from (``reproduce.phases.DEPENDS``), in pipeline order."""
+    found, todo = set(), [phase]
+    while todo:
+        name = todo.pop()
+        if name not in found:
+            found.add(name)
+            todo.extend(DEPENDS.get(name, ()))
+    return [name for name in DEPENDS if name in found]
+
+
+def generator_warnings(res: dict) -> list[str]:
+    """The generator's own gate warnings (``worlds.quality.diagnose``: collapsed, overfit, inert, narrow, shifted), as
+    its phase recorded them and as ``quality.json`` holds them."""
+    recorded = (res["phases"].get("generator", {}).get("outputs") or {}).get("warnings") or []
+    return list(dict.fromkeys([*recorded, *((res.get("quality") or {}).get("warnings") or [])]))
+
+
+def causes(row: Headline, results: dict) -> list[str]:
+    """What the run's own record shows that may move this number away from the paper's: one seed per arm, the
+    generator's gate warnings, each setting that differs from the paper preset in a phase the number is computed
+    from, a normalisation the paper does not give, and settings a phase did not record."""
+    env = row.key.split(".")[0]
+    res, spec, kind = results[env], registry.get(env), family(row.key)
     found = []
-    for phase, field, budget, words in BUDGETS.get(kind, ()):
-        ours, theirs = res["phases"].get(phase, {}).get("config", {}).get(field), paper.get(budget)
-        ours, theirs = (len(v) if isinstance(v, (list, tuple)) else v for v in (ours, theirs))
-        if field == "seeds" and ours == 1:
-            continue
-        if isinstance(ours, int) and isinstance(theirs, int) and ours < theirs:
-            found.append(f"{ours:,} {words} (the paper's: {theirs:,})")
-    repeats = res["phases"].get(kind, {}).get("config", {}).get("repeats")
-    if isinstance(repeats, int) and repeats < PAPER_REPEATS:
-        found.append(f"{repeats} episodes per world (the paper's: {PAPER_REPEATS})")
+    if kind == "influence" and seeds_of(res) == 1:
+        found.append("one seed per arm: a single agent per arm cannot show the direction of a change")
+    found += [f"the generator failed its own gate ({line.split(':')[0]})" for line in generator_warnings(res)]
+    behind = phases_behind(kind) if kind in DEPENDS else []
+    settings = [
+        d.text()
+        for phase in behind
+        for d in setting_differences(env, phase, res["phases"].get(phase, {}).get("config") or {})
+        if not (d.phase == "influence" and d.name == "seeds" and seeds_of(res) == 1)  # said above
+    ]
+    if settings:
+        found.append("settings unlike the paper's preset: " + ", ".join(dict.fromkeys(settings)))
+    unrecorded = [phase for phase in behind if not res["phases"].get(phase, {}).get("config")]
+    if unrecorded or "paper" not in spec.presets:
+        what = f"the {', '.join(unrecorded)} phase recorded no settings" if unrecorded else f"{env} has no paper preset"
+        found.append(f"unexplained: {what}, so nothing says whether the run matched the paper's")
+    if ("normalised" in row.key or "reward_change" in row.key) and spec.metrics.bounds is None:
+        found.append("normalised by this run's best single episode, a rule the paper does not give")
     return found
 
 
 def likely_cause(row: Headline, results: dict) -> str:
-    """Why this run's number probably differs: smaller budgets, the normalisation, one seed."""
-    env = row.key.split(".")[0]
-    res, spec, kind = results[env], registry.get(env), family(row.key)
-    causes = []
-    if kind == "influence" and seeds_of(res) == 1:
-        causes.append("one seed per arm: a single agent per arm cannot show the direction of a change")
-    budgets = smaller_budgets(res, env, kind)
-    if budgets:
-        causes.append("smaller budgets: " + ", ".join(budgets))
-    if "normalised" in row.key or "reward_change" in row.key:
-        if spec.metrics.bounds is None:
-            causes.append("normalised by this run's best single episode, a rule the paper does not give")
-    return "; ".join(causes) or "the same budgets as the paper's preset: a real difference, see the section"
+    """The causes of ``causes`` joined; a real difference only when the run's record shows none."""
+    found = causes(row, results)
+    return "; ".join(found) or "unexplained by the run's settings: every one matches the paper's preset, a real difference; see the section"
 
 
 def departures(rows: list[Headline], results: dict) -> list[Departure]:
@@ -129,15 +268,51 @@ def share_notes(results: dict) -> dict[str, str]:
     return {env: line for env, line in notes.items() if line}
 
 
-def departures_section(rows: list[Headline], results: dict, preset: str | None = None) -> str:
-    """The report's opening box: each number that departs from the paper, its likely cause and its section; one-seed warnings."""
-    found = departures(rows, results)
-    budgets = (
-        f"<p>This run used the <code>{esc(preset)}</code> preset, whose budgets lie below the paper's (Provenance lists them); "
-        "<code>worldagent reproduce --preset paper</code> runs the paper's.</p>"
-        if preset and preset != "paper"
+def settings_box(results: dict, preset: str | None) -> str:
+    """The preset's line and, folded, every setting of the run that differs from the paper preset (``run_differences``)."""
+    found = {env: run_differences(env, res) for env, res in results.items()}
+    count = sum(len(d) for d in found.values())
+    unmatched = [env for env in results if "paper" not in registry.get(env).presets]
+    named = f"the <code>{esc(preset)}</code> preset" if preset else "its own settings"
+    if not count:
+        line = f"<p>This run used {named}; every setting its phases recorded matches the paper's preset.</p>"
+    else:
+        line = (
+            f"<p>This run used {named}: <strong>{count} of its settings {'differs' if count == 1 else 'differ'} from the paper's preset</strong> "
+            "(each is named below as a possible cause where a number depends on it); "
+            "<code>worldagent reproduce --preset paper</code> runs the paper's.</p>"
+        )
+    rows = "".join(
+        f"<tr data-setting='{esc(env)}/{esc(d.phase)}/{esc(d.name)}'><td>{esc(env)}</td><td>{esc(d.phase)}</td><td>{esc(d.words)}</td>"
+        f"<td>{esc(d.shown(d.ours))}</td><td>{esc(d.shown(d.paper))}</td></tr>"
+        for env, differences in found.items()
+        for d in differences
+    )
+    table = (
+        f"<details><summary>The {count} {'setting that differs' if count == 1 else 'settings that differ'} from the paper's preset</summary>"
+        "<table><thead><tr><th>env</th><th>phase</th><th>setting</th><th>ours</th><th>paper's preset</th></tr></thead>"
+        f"<tbody>{rows}</tbody></table></details>"
+        if count
         else ""
     )
+    none = "".join(f"<p>{esc(env)} has no paper preset: nothing to set its settings beside.</p>" for env in unmatched)
+    return line + table + none
+
+
+def generator_box(results: dict) -> str:
+    """Each env's generator gate warnings (``generator_warnings``): every number of that env is drawn from that G(z)."""
+    lines = "".join(
+        f"<li data-flag='generator-warning' data-env='{esc(env)}'>{esc(env)}: the generator failed its own gate: {esc(line)}</li>"
+        for env, res in results.items()
+        for line in generator_warnings(res)
+    )
+    return f"<ul class='warning'>{lines}</ul>" if lines else ""
+
+
+def departures_section(rows: list[Headline], results: dict, preset: str | None = None) -> str:
+    """The report's opening box: the settings unlike the paper's, the generator's gate warnings, each number that departs
+    from the paper with its possible causes and its section; one-seed warnings; the world's share."""
+    found = departures(rows, results)
     compared = [r for r in rows if r.ours is not None and r.paper is not None]
     if not compared:
         head = "<p>No headline number of this run can be set beside the paper's yet (the phases that make them have not run).</p>"
@@ -154,7 +329,7 @@ def departures_section(rows: list[Headline], results: dict, preset: str | None =
         for d in found
     )
     table = (
-        "<table><thead><tr><th>quantity</th><th>ours</th><th>paper</th><th>likely cause</th><th>section</th></tr></thead>"
+        "<table><thead><tr><th>quantity</th><th>ours</th><th>paper</th><th>possible causes (the run's own record)</th><th>section</th></tr></thead>"
         f"<tbody>{body}</tbody></table>"
         if found
         else ""
@@ -168,4 +343,9 @@ def departures_section(rows: list[Headline], results: dict, preset: str | None =
         if shares
         else ""
     )
-    return f"<div class='departures'>{budgets}{head}{table}" + (f"<ul class='warning'>{notes}</ul>" if notes else "") + share_list + "</div>"
+    return (
+        f"<div class='departures'>{settings_box(results, preset)}{generator_box(results)}{head}{table}"
+        + (f"<ul class='warning'>{notes}</ul>" if notes else "")
+        + share_list
+        + "</div>"
+    )

@@ -4,8 +4,9 @@
 the numbers ``results.env_results`` recomputes from its run store, the generator's
 ``quality.json``, the agents' learning curves and ``influence.json`` (where each lives:
 ``runs.RunLayout``, read through ``runs.Run``), and writes ``run_dir/report.html``: inline CSS, every figure a
-base64 PNG. It reads like a result: where this run departs from the paper first (``departures``: each
-gap with its likely cause and a link to its section), the headline numbers beside the paper's, then the
+base64 PNG. It reads like a result: where this run departs from the paper first (``departures``: the
+settings unlike the paper's preset, the generator's gate warnings, each gap with the possible causes the
+run's own record shows and a link to its section), the headline numbers beside the paper's, then the
 figures behind them, the provenance (versions, phases, the preset) last and folded; it ends its
 headline section with the ``worldagent explore`` command that opens the same run interactively.
 Each headline number is printed next to the paper's value (``spec.paper``) and

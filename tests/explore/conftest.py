@@ -42,12 +42,13 @@ def goal_mark(env, state):
 GOAL_STYLE = {"goal": {"shape": "dot", "colour": "#ff00ff", "radius": 0.06}}
 
 
-def explorer_toy():
-    """The toy env's spec with a picture locator, marks and a failure event (what the explorer's views use)."""
+def explorer_toy(name: str = "toy"):
+    """The toy env's spec with a picture locator, marks and a failure event (what the explorer's views use);
+    another ``name`` gives a second environment of a run."""
     import toy_env
 
     pictures = dataclasses.replace(toy_env.SPEC.pictures, locate=cell_centres, marks=goal_mark, mark_styles=GOAL_STYLE)
-    return dataclasses.replace(toy_env.SPEC, pictures=pictures, failure="reached < 0.5")
+    return dataclasses.replace(toy_env.SPEC, name=name, pictures=pictures, failure="reached < 0.5")
 
 
 @contextlib.contextmanager
@@ -91,6 +92,19 @@ def toy_run(tmp_path_factory):
 
 
 def write_toy_run(toy_spec, run_dir):
+    write_toy_env(toy_spec, run_dir)
+    write_manifest(run_dir, [toy_spec.name])
+    return run_dir
+
+
+def write_manifest(run_dir, envs: list[str]) -> None:
+    done = {"status": "done", "config": {}, "outputs": {}}
+    manifest = {"format_version": 1, "preset": "test", "seed": 0, "envs": envs, "phases": {f"{env}/generator": done for env in envs}}
+    (run_dir / "manifest.json").write_text(json.dumps(manifest))
+
+
+def write_toy_env(toy_spec, run_dir):
+    """One environment's part of the toy run: dataset, generator, and a store of a random and an atlas campaign."""
     from worldagent.search.atlas import Grid
     from worldagent.store import RunStore
     from worldagent.worlds.dataset import make_dataset
@@ -113,10 +127,7 @@ def write_toy_run(toy_spec, run_dir):
     with RunStore(layout.store_path) as store:
         store_campaign(store, toy_spec, dataset, "random-return-s0", {}, rng.normal(size=(WORLDS, 3)), rng)
         store_campaign(store, toy_spec, dataset, "atlas-min-return-s0", {"atlas": {"grid": grid.record()}}, rng.normal(size=(WORLDS, 3)), rng)
-    done = {"status": "done", "config": {}, "outputs": {}}
-    manifest = {"format_version": 1, "preset": "test", "seed": 0, "envs": [toy_spec.name], "phases": {f"{toy_spec.name}/generator": done}}
-    (run_dir / "manifest.json").write_text(json.dumps(manifest))
-    return run_dir
+    return layout
 
 
 @pytest.fixture
@@ -131,3 +142,62 @@ def session(toy_spec, toy_run):
     from worldagent.explore.session import Session
 
     return Session.open(toy_run)
+
+
+DIFF_PAIRS = {  # diff campaign -> (A, B) scripted agents, and every how many worlds B fails where A passes
+    "diff-homing-random-s0": (("homing", "random"), 2),
+    "diff-homing-random-s1": (("homing", "random"), 3),
+}
+
+
+def store_diff_campaign(store, spec, dataset, name: str, agents: tuple[str, str], every: int, latents: np.ndarray, rng) -> None:
+    """A diff campaign as ``differential.fixed_set`` stores one: the pair in ``config["diff"]``, B's metrics under their
+    names and A's under ``A.<name>`` (A passes everywhere; B fails on every ``every``-th world). No episode is played."""
+    from worldagent.search.campaign import campaign_stream
+
+    records = {side: {"kind": "scripted", "path": agent, "sha256": None} for side, agent in zip("ab", agents)}
+    config = {"dim": latents.shape[1], "diff": records, "stream": campaign_stream(name)}
+    campaign = store.open_campaign(name, spec.name, "return", False, "fixed", len(latents), 0, config, resume=False)
+    for slot, z in enumerate(latents):
+        b = fake_episodes(rng, failing=slot % every == 0)
+        episodes = [{**e, **{f"A.{k}": v for k, v in passing.items()}} for e, passing in zip(b, fake_episodes(rng, failing=False))]
+        for e in episodes:
+            e["A.reached"] = 1.0  # A passes every world: the regressed worlds are B's failures
+        store.add(campaign, 0, slot, z, float(np.mean([e["return"] for e in episodes])), episodes, 0.0, world=dataset.world(slot % len(dataset)))
+
+
+def add_diff_campaigns(spec, run_dir, campaigns: dict = DIFF_PAIRS, seed: int = 1) -> None:
+    """Write ``campaigns`` (as ``DIFF_PAIRS``) into the toy env's store of ``run_dir``, as `worldagent diff` would."""
+    from worldagent.store import RunStore
+    from worldagent.worlds.dataset import WorldDataset
+
+    layout = RunLayout(run_dir, spec.name)
+    dataset, rng = WorldDataset.load(layout.dataset_path), np.random.default_rng(seed)
+    with RunStore(layout.store_path) as store:
+        for name, (agents, every) in campaigns.items():
+            store_diff_campaign(store, spec, dataset, name, agents, every, rng.normal(size=(WORLDS, 3)), rng)
+
+
+@pytest.fixture(scope="session")
+def diff_toy_run(tmp_path_factory):
+    """A run of two environments: ``toy`` with two diff campaigns (``DIFF_PAIRS``), ``toy2`` without any."""
+    run_dir = tmp_path_factory.mktemp("explore-diff") / "run"
+    with registered(explorer_toy()) as toy, registered(explorer_toy("toy2")) as toy2:
+        write_toy_env(toy, run_dir)
+        write_toy_env(toy2, run_dir)
+        add_diff_campaigns(toy, run_dir)
+    write_manifest(run_dir, ["toy", "toy2"])
+    return run_dir
+
+
+@pytest.fixture(scope="module")
+def toy2_spec():
+    """A second toy environment (``toy2``), registered for one test file."""
+    with registered(explorer_toy("toy2")) as spec:
+        yield spec
+
+
+@pytest.fixture
+def add_diff():
+    """``add_diff_campaigns``: write diff campaigns into a toy run (as `worldagent diff` would), for a test to call."""
+    return add_diff_campaigns

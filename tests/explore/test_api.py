@@ -419,3 +419,26 @@ def test_another_sites_page_cannot_use_the_explorer(client):
     evil = client.post("/api/toy/save", json={"world": 0}, headers={"origin": "http://attacker.example"})
     assert evil.status_code == 403 and "cross-origin" in evil.json()["error"]
     assert client.get("/api/run", headers={"origin": "http://127.0.0.1"}).status_code == 200  # the page's own origin
+
+
+def test_a_diff_written_while_serving_shows_on_the_next_request_with_its_agents(toy_spec, fresh_toy_run, add_diff):
+    from worldagent.explore.session import Session
+
+    session = Session.open(fresh_toy_run)
+    client = TestClient(make_app(session), base_url=LOCAL)
+    before, old_map = client.get("/api/run").json()["envs"][0], client.get("/api/toy/map").json()
+    assert before["diffs"] == [] and not any(a.startswith("diff") for a in before["agents"])
+    assert client.get("/api/toy/diff").status_code == 400
+    add_diff(toy_spec, fresh_toy_run, {"diff-late-s0": (("homing", "random"), 2)})  # `worldagent diff --out` into the served run
+    found = client.get("/api/toy/diff").json()  # the same server, not restarted
+    late = stored(fresh_toy_run, "diff-late-s0")
+    by_hand = sum(np.mean([e["reached"] for e in ev.episodes]) < 0.5 <= np.mean([e["A.reached"] for e in ev.episodes]) for ev in late)
+    assert (found["campaign"], found["worlds"], found["regressed"]) == ("diff-late-s0", len(late), by_hand) and by_hand > 0
+    assert found["agents"] == ["diff/A", "diff/B"] and found["pair"] == {"A": "scripted homing", "B": "scripted random"}
+    after = client.get("/api/run").json()["envs"][0]
+    assert after["diffs"] == ["diff-late-s0"] and {"diff/A", "diff/B"} <= set(after["agents"]) and after["worlds"] == before["worlds"] + len(late)
+    new_map, n = client.get("/api/toy/map").json(), len(old_map["x"])
+    assert new_map["x"][:n] == old_map["x"] and new_map["campaign"][:n] == old_map["campaign"]  # earlier worlds keep their indices and places
+    assert new_map["campaigns"][-1] == "diff-late-s0" and len(new_map["x"]) == n + len(late)
+    assert client.get(f"/api/toy/world/{found['rows'][0]['index']}").json()["campaign"] == "diff-late-s0"
+    assert session.env("toy").rescan() == 0  # nothing new: nothing read again

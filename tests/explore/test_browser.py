@@ -15,6 +15,7 @@ By default it runs over the toy run of ``conftest.py``. ``WORLDAGENT_EXPLORER_RU
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -47,17 +48,14 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
-@pytest.fixture(scope="module")
-def explorer_url(request):
-    """The explorer serving the toy run (or ``WORLDAGENT_EXPLORER_RUN``) on a free local port, in a thread."""
+@contextlib.contextmanager
+def serving(run_dir):
+    """The explorer serving ``run_dir`` on a free local port, in a thread; yields its URL."""
     import uvicorn
 
     from worldagent.explore.server import make_app
     from worldagent.explore.session import Session
 
-    if not os.environ.get("WORLDAGENT_EXPLORER_RUN"):
-        request.getfixturevalue("toy_spec")  # registered while this file's tests run
-    run_dir = os.environ.get("WORLDAGENT_EXPLORER_RUN") or request.getfixturevalue("toy_run")
     port = free_port()
     server = uvicorn.Server(uvicorn.Config(make_app(Session.open(run_dir)), host="127.0.0.1", port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)
@@ -66,9 +64,28 @@ def explorer_url(request):
     while not server.started and time.monotonic() < deadline:
         time.sleep(0.05)
     assert server.started, "the explorer did not start within 30 s"
-    yield f"http://127.0.0.1:{port}/"
-    server.should_exit = True
-    thread.join(timeout=10)
+    try:
+        yield f"http://127.0.0.1:{port}/"
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def explorer_url(request):
+    """The explorer serving the toy run (or ``WORLDAGENT_EXPLORER_RUN``) on a free local port, in a thread."""
+    if not os.environ.get("WORLDAGENT_EXPLORER_RUN"):
+        request.getfixturevalue("toy_spec")  # registered while this file's tests run
+    run_dir = os.environ.get("WORLDAGENT_EXPLORER_RUN") or request.getfixturevalue("toy_run")
+    with serving(run_dir) as url:
+        yield url
+
+
+@pytest.fixture(scope="module")
+def diff_url(toy_spec, toy2_spec, diff_toy_run):
+    """The explorer serving ``diff_toy_run``: ``toy`` with two diff campaigns, ``toy2`` with none."""
+    with serving(diff_toy_run) as url:
+        yield url
 
 
 @pytest.fixture(scope="module")
@@ -82,19 +99,33 @@ def browser():
         launched.close()
 
 
-@pytest.fixture
-def page(browser, explorer_url):
-    """A fresh page on the explorer, failing the test on any console error or uncaught exception."""
+@contextlib.contextmanager
+def opened(browser, url: str):
+    """A fresh page on ``url``, failing the test on any console error or uncaught exception."""
     page = browser.new_page(viewport={"width": 1400, "height": 900})
     errors: list[str] = []
     page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
     page.on("pageerror", lambda error: errors.append(str(error)))
-    env = os.environ.get("WORLDAGENT_EXPLORER_ENV", "")
-    page.goto(explorer_url + (f"#env={env}" if env else ""))
+    page.goto(url)
     page.wait_for_selector("body[data-ready='1']", timeout=WAIT_MS)
     yield page
     page.close()
     assert not errors, f"console errors: {errors}"
+
+
+@pytest.fixture
+def page(browser, explorer_url):
+    """A fresh page on the explorer (``opened``)."""
+    env = os.environ.get("WORLDAGENT_EXPLORER_ENV", "")
+    with opened(browser, explorer_url + (f"#env={env}" if env else "")) as page:
+        yield page
+
+
+@pytest.fixture
+def diff_page(browser, diff_url):
+    """A fresh page on the explorer over ``diff_toy_run``."""
+    with opened(browser, diff_url) as page:
+        yield page
 
 
 def shot(page, name: str) -> None:
@@ -373,3 +404,89 @@ def test_every_view_names_what_it_shows(page):
         head = text(page, "#failures-table tr")
         assert "severity" in head and "there" in head  # each failing world's metrics, and its nearest passing world's
         assert "Severity:" in text(page, "#failures-help")
+
+
+def status_text(page) -> str:
+    return text(page, "#status")
+
+
+def test_a_superseded_play_leaves_no_status(page, slow_plays):
+    """A play's status line belongs to its world and to the World view: a world opened or a view changed meanwhile
+    takes it away, and the superseded play's answer writes none."""
+    open_world(page, 0)
+    page.click("#play")
+    page.wait_for_function("/playing|compiling/.test(document.querySelector('#status').textContent)")
+    open_world(page, 1)  # the play of world 0 is still running
+    assert "play" not in status_text(page) and "compil" not in status_text(page)
+    page.wait_for_timeout(int(1.5 * PLAY_DELAY * 1000))  # its answer has come back (and was dropped)
+    assert page.evaluate("explorer.state.stats.dropped") >= 1
+    assert "play" not in status_text(page), status_text(page)
+    page.click("#play")
+    page.wait_for_function("/playing|compiling/.test(document.querySelector('#status').textContent)")
+    page.click("button[data-view='map']")  # the play goes on; the Map view says its own line
+    worlds = page.evaluate("explorer.state.run.envs.find(e => e.name === explorer.state.env).worlds")
+    assert status_text(page) == f"toy: {worlds} stored evaluations"
+    page.wait_for_function(PLAYED, timeout=WAIT_MS)
+    assert status_text(page) == f"toy: {worlds} stored evaluations"
+
+
+SLOW_DIFF = "diff-homing-random-s1"  # its answers take DIFF_DELAY s: an earlier request for it answers after a later one
+DIFF_DELAY = 0.8
+
+
+@pytest.fixture
+def slow_diffs(monkeypatch):
+    """The Diff view's answers for ``SLOW_DIFF`` come ``DIFF_DELAY`` s late (the server runs in this process)."""
+    import worldagent.explore.session as explorer_session
+
+    view = explorer_session.diff_view
+
+    def slow(session, campaign, event, limit):
+        if campaign == SLOW_DIFF:
+            time.sleep(DIFF_DELAY)
+        return view(session, campaign, event, limit)
+
+    monkeypatch.setattr(explorer_session, "diff_view", slow)
+
+
+def shown_diff(page) -> dict:
+    """What the Diff view shows: the select's campaign, the summary's, the answer kept, the table's worlds."""
+    return page.evaluate(
+        "({ chosen: document.querySelector('#diff-campaign').value, summary: document.querySelector('#diff-summary').textContent,"
+        " kept: explorer.state.diff && explorer.state.diff.campaign,"
+        " worlds: [...document.querySelectorAll('#diff-table tr td:nth-child(2) img')].map(i => Number(i.dataset.world)) })"
+    )
+
+
+def test_quick_diff_campaign_switches_end_on_the_chosen_campaigns_table(diff_page, slow_diffs):
+    page = diff_page
+    campaigns = page.evaluate("explorer.state.run.envs.find(e => e.name === 'toy').diffs")
+    assert len(campaigns) == 2 and SLOW_DIFF == campaigns[1]
+    page.click("button[data-view='diff']")
+    page.wait_for_function(f"document.querySelector('#diff-summary').textContent.startsWith('{campaigns[0]}:')")
+    for k in range(8):  # the last but one is the slow campaign: its answer comes after the last one's
+        page.select_option("#diff-campaign", campaigns[(k + 1) % 2])
+        page.wait_for_timeout(100)
+    page.wait_for_timeout(int(1.5 * DIFF_DELAY * 1000))  # every answer is back
+    shown = shown_diff(page)
+    expected = page.evaluate(f"fetch('/api/toy/diff?limit=20&campaign={campaigns[0]}').then(r => r.json())")
+    assert shown["chosen"] == shown["kept"] == campaigns[0] and shown["summary"].startswith(f"{campaigns[0]}: {expected['regressed']} of ")
+    assert shown["worlds"] == [row["index"] for row in expected["rows"]] and shown["worlds"]
+    assert "A: scripted homing, B: scripted random" in shown["summary"]  # A and B named
+
+
+def test_switching_env_on_the_diff_view_leaves_none_of_its_table(diff_page, slow_diffs):
+    page = diff_page
+    page.click("button[data-view='diff']")
+    page.wait_for_selector("#diff-table img")
+    page.select_option("#diff-campaign", SLOW_DIFF)  # still on its way when the env changes
+    page.select_option("#env", "toy2")
+    page.wait_for_function("explorer.state.env === 'toy2' && explorer.state.map !== null && explorer.state.view === 'map'")
+    page.wait_for_timeout(int(1.5 * DIFF_DELAY * 1000))  # toy's late answer is back
+    shown = shown_diff(page)
+    assert shown == {"chosen": "", "summary": "", "kept": None, "worlds": []}
+    assert page.is_hidden("#view-diff") and page.is_hidden("#diff-tab") and page.is_visible("#view-map")  # toy2 has no diff
+    assert status_text(page).startswith("toy2: ")
+    page.select_option("#env", "toy")
+    page.wait_for_function("explorer.state.env === 'toy' && explorer.state.map !== null")
+    assert page.is_visible("#diff-tab")

@@ -142,3 +142,15 @@ def test_a_tagged_out_agent_is_marked_where_it_was_hit():
     for t in range(episode["steps"] + 1):
         assert shown_at(episode["marks"]["tagged"], t) == ({(5.0, 55.0)} if t in out else set())  # cell (5, 0), 10 px a cell
     assert shown_at(episode["marks"]["beam"], out[0])  # the beam that hit it
+
+
+def test_agents_keep_the_colours_of_the_envs_own_pictures():
+    """The explorer draws each agent in the colour the env's picture of episodes (and so the report's figures) gives it."""
+    from worldagent.envs.harvest import render
+    from worldagent.explore.episodes import agent_colours
+
+    harvest = agent_colours(registry.get("harvest").pictures)
+    assert len(harvest) == len(render.AGENT_COLOURS) == 4
+    for css, rgb in zip(harvest, render.AGENT_COLOURS, strict=True):
+        assert [int(css[k : k + 2], 16) for k in (1, 3, 5)] == [round(255 * v) for v in rgb]
+    assert agent_colours(registry.get("racing").pictures) == []  # one agent: each episode its own colour (the page's)

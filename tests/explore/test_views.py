@@ -60,3 +60,22 @@ def test_atlas_cells_fold_extra_descriptors_into_the_worst_world():
 def test_a_world_evaluated_again_is_one_world():
     first, counts = views.distinct_worlds(["a", "b", "a", "a"], np.array([2, 1, 0, 3]))
     assert first.tolist() == [2, 1] and counts.tolist() == [3, 1]
+
+
+def test_each_campaign_has_its_own_marker_up_to_the_distinct_count():
+    markers = views.campaign_markers(12)  # the quick run's twelve campaigns: two shared a shape before
+    assert len({(m["shape"], m["filled"]) for m in markers}) == 12
+    assert len({(m["shape"], m["filled"]) for m in views.MARKERS}) == len(views.MARKERS) == 22
+    every = views.campaign_markers(len(views.MARKERS) + 2)
+    assert len({(m["shape"], m["filled"]) for m in every[: len(views.MARKERS)]}) == len(views.MARKERS)
+    # past the distinct count markers start over (the map's legend says so): campaign 23 looks like campaign 1
+    assert every[len(views.MARKERS)] == every[0] and every[len(views.MARKERS) + 1] == every[1]
+
+
+def test_the_worse_end_of_a_metric_is_the_failure_side_then_the_atlas_side():
+    selection = parse_selection("crashed > 0.5", "racing")
+    names = ["return", "crashed", "steps"]
+    # the failure event's side first; an atlas minimising return searched its low end; steps: nobody says
+    assert views.worse_ends(selection, [("return", False), ("crashed", False)], names) == {"crashed": "high", "return": "low"}
+    assert views.worse_ends(parse_selection("group_reward < 50", "harvest"), [("group_reward", True)], ["group_reward"]) == {"group_reward": "low"}
+    assert views.worse_ends(None, [("return", True), ("other", False)], names) == {"return": "high"}  # only metrics the map has

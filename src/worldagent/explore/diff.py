@@ -57,6 +57,11 @@ def diff_agents(campaigns: dict[str, dict]) -> dict[str, str]:
     return found
 
 
+def agent_text(record: dict) -> str:
+    """What a recorded agent is, in words: ``scripted homing``, ``worldagent runs/quick/racing/agent``."""
+    return " ".join(str(record[key]) for key in ("kind", "path") if record.get(key)) or "an agent of unknown kind"
+
+
 def replay(evaluation: Any, campaign: Any) -> dict:
     """{"seed", "episodes"}: what the World view's play takes to replay a stored world's own episodes
     (its keys are ``split(key(seed), episodes)``, as the campaign played it)."""
@@ -73,7 +78,8 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
     """The regressed worlds of diff campaign ``campaign`` (default: the first) under ``event`` (default: the env's failure).
 
     Returns:
-        {"campaign", "campaigns", "agents": [label A, label B] (those loadable), "event", "worlds",
+        {"campaign", "campaigns", "agents": [label A, label B] (those loadable), "pair": {"A", "B"} (what each
+        agent is, ``agent_text``), "event", "worlds",
         "regressed", "improved", "rows": [{"index", "log_prior", "a", "b" ({metric: mean}),
         "nearest_passing" (index or None), "distance", "replay", "nearest_replay" (``replay``'s
         {"seed", "episodes"} of the world and of its nearest passing one, or None)}]}.
@@ -116,6 +122,7 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
         "campaign": campaign,
         "campaigns": list(campaigns),
         "agents": [label for label in pair_labels(campaigns)[campaign] if label in loadable],
+        "pair": {side.upper(): agent_text(campaigns[campaign][side]) for side in ("a", "b")},
         "event": selection.describe(),
         "worlds": len(evaluations),
         "regressed": int(np.sum(fail_b & ~fail_a)),

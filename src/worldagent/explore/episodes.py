@@ -186,7 +186,20 @@ def picture_key(pictures, size: int = 384) -> dict:
         "marks": {kind: mark_style(style, size, kind) for kind, style in pictures.mark_styles.items()},
         "agents": list(pictures.agents),
         "outcomes": {name: mark_style(style, size, name) for name, style in pictures.outcomes.items()},
+        "agent_colours": agent_colours(pictures),
     }
+
+
+# Agent by agent, the colours the report's figures draw several agents in (harvest's ``render.AGENT_COLOURS``, RGB in
+# [0, 1]: red, blue, orange, magenta), then more that no floor, wall or road has. ``Pictures`` names no colours, so the
+# explorer keeps this copy; tests/explore/test_marks.py holds it to the env's own.
+AGENT_COLOURS = ("#f24040", "#408cff", "#ffa61a", "#d959f2", "#00d8ff", "#ffd400", "#ffffff", "#8a2be2")
+
+
+def agent_colours(pictures) -> list[str]:
+    """The CSS colours the World view draws the agents of an env with several in (``AGENT_COLOURS``, one per agent
+    ``Pictures.agents`` names); empty for one agent, whose episodes each get their own colour instead."""
+    return list(AGENT_COLOURS[: len(pictures.agents)]) if len(pictures.agents) > 1 else []
 
 
 def still_picture(spec, world: Any, played, size: int) -> str | None:

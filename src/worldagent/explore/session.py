@@ -93,18 +93,22 @@ class EnvSession:
     warming: str | None = None  # the agent the warm-up is compiling now
     cache_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     pictures: OrderedDict = field(default_factory=OrderedDict, repr=False)
+    counts: dict = field(default_factory=dict, repr=False)  # {campaign: evaluations stored} when last read (``rescan``)
+    scan_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _loaded: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def open(cls, run: Run, env: str) -> EnvSession:
         spec = registry.get(env)
+        counts = stored_counts(run, env)  # before the evaluations: what is added between is read twice, never missed
         stored = [e for e in run.evaluations(env) if len(e.latent)]
         dim = run_latent_dim(run, env, stored)
         evaluations = [e for e in stored if len(e.latent) == dim]  # a store searched with another generator keeps its own latents
         latents = np.stack([e.latent for e in evaluations]).astype(np.float64) if evaluations else np.zeros((0, dim))
         projection = views.principal_projection(latents if len(latents) else np.zeros((1, dim)))
         names = views.scalar_metrics(evaluations, spec.metrics.names)
-        return cls(run, env, evaluations, latents, projection, projection(latents), views.metric_table(evaluations, names), agent_sources(run, env))
+        means = views.metric_table(evaluations, names)
+        return cls(run, env, evaluations, latents, projection, projection(latents), means, agent_sources(run, env), counts=counts)
 
     @property
     def spec(self):
@@ -114,9 +118,49 @@ class EnvSession:
     def latent_dim(self) -> int:
         return int(self.latents.shape[1])
 
+    def rescan(self) -> int:
+        """Read the evaluations the store gained since it was last read (a `worldagent diff` written into the
+        run while the explorer serves it, a campaign still running) and the agents they name; returns how many.
+
+        Cheap when nothing changed (one count per campaign). New evaluations are appended: every stored world
+        keeps its index (a page's map and links stay right) and the map's projection stays as it was.
+        """
+        with self.scan_lock:
+            counts = stored_counts(self.run, self.env)
+            grown = [name for name, count in counts.items() if count > self.counts.get(name, 0)]
+            if not grown:
+                return 0
+            known = {(e.campaign, e.generation, e.slot) for e in self.evaluations}
+            with self.run.store(self.env) as store:
+                read = [e for name in grown for e in store.evaluations(name)]
+            added = [e for e in read if (e.campaign, e.generation, e.slot) not in known and len(e.latent) == self.latent_dim]
+            self.counts = counts
+            self._forget_agents(agent_sources(self.run, self.env))
+            for key in ("index", "atlas_names", "share"):  # read again when next asked
+                self._loaded.pop(key, None)
+            if added:
+                latents = np.stack([e.latent for e in added]).astype(np.float64)
+                more = views.metric_table(added, list(self.means))
+                # arrays first, the list of evaluations last: a request reading meanwhile sees the old worlds whole
+                self.means = {name: np.concatenate([values, more[name]]) for name, values in self.means.items()}
+                self.latents = np.concatenate([self.latents, latents])
+                self.xy = np.concatenate([self.xy, self.projection(latents)])
+                self.evaluations = self.evaluations + added
+            return len(added)
+
+    def _forget_agents(self, agents: dict[str, str]) -> None:
+        """Take ``agents`` as the agent list; a label that now names another agent is loaded (and compiled) again."""
+        changed = {label for label, source in self.agents.items() if agents.get(label) != source}
+        for label in changed:
+            self._loaded.pop(f"agent:{label}", None)
+        self.ready = {(agent, bucket) for agent, bucket in self.ready if agent not in changed}
+        self.agents = agents
+
     def describe(self) -> dict:
-        """What the page needs to lay out this environment's views."""
+        """What the page needs to lay out this environment's views (read after ``rescan``: a reload shows what the store gained)."""
+        self.rescan()
         spec = self.spec
+        selection = parse_selection(spec.failure, self.env) if spec.failure else None
         return {
             "name": self.env,
             "latent_dim": self.latent_dim,
@@ -128,7 +172,8 @@ class EnvSession:
             "agents": list(self.agents),
             "has_generator": self.run.has_generator(self.env),
             "animates": spec.pictures.locate is not None,
-            "thresholds": views.thresholds(parse_selection(spec.failure, self.env), list(self.means)) if spec.failure else {},
+            "thresholds": views.thresholds(selection, list(self.means)) if selection else {},
+            "worse": views.worse_ends(selection, self.atlas_ends(), list(self.means)),
             "key": picture_key(spec.pictures),
             "atlases": self.atlas_names(),
             "diffs": list(diff_campaigns(self.run, self.env)),
@@ -181,6 +226,8 @@ class EnvSession:
             "y": rounded(self.xy[:, 1]),
             "campaigns": campaigns,
             "campaign": [order[e.campaign] for e in self.evaluations],
+            "markers": views.campaign_markers(len(campaigns)),
+            "distinct_markers": len(views.MARKERS),
             "metrics": {name: rounded(values) for name, values in self.means.items()},
             "axes": rounded(self.projection.axes),
             "centre": rounded(self.projection.centre),
@@ -324,6 +371,14 @@ class EnvSession:
             self._loaded["atlas_names"] = names
         return self._loaded["atlas_names"]
 
+    def atlas_ends(self) -> list[tuple[str, bool]]:
+        """(metric, maximize) of each atlas campaign: the end of its metric it searched for."""
+        if not self.atlas_names():
+            return []
+        with self.run.store(self.env) as store:
+            found = [store.campaign(name) for name in self.atlas_names()]
+        return [(c.objective, bool(c.maximize)) for c in found if c is not None]
+
     def atlas(self, name: str | None) -> dict:
         """The atlas campaign ``name`` (default: the first) as heat-map cells, each with its worst world."""
         names = self.atlas_names()
@@ -359,7 +414,8 @@ class EnvSession:
         }
 
     def diff(self, campaign: str | None, event: str | None, limit: int) -> dict:
-        """A diff campaign's regressed worlds (``explore.diff.diff_view``)."""
+        """A diff campaign's regressed worlds (``explore.diff.diff_view``), with any diff written since the last request."""
+        self.rescan()
         return diff_view(self, campaign, event, limit)
 
     # -- G(z) and the agents ---------------------------------------------------------------------
@@ -478,6 +534,17 @@ def first_episodes(played, marks: dict, count: int):
         return played, marks
     cut = Episodes(played.positions[:count], played.present[:count], played.steps[:count], {k: v[:count] for k, v in played.metrics.items()})
     return cut, {kind: (where[:count], shown[:count]) for kind, (where, shown) in marks.items()}
+
+
+def stored_counts(run: Run, env: str) -> dict[str, int]:
+    """{campaign: evaluations stored} of ``env``'s store, campaigns in store order (one query over the store's index)."""
+    if not run.has_store(env):
+        return {}
+    with run.store(env) as store:
+        rows = store.db.execute(
+            "SELECT c.name, COUNT(e.id) FROM campaigns c LEFT JOIN evaluations e ON e.campaign_id = c.id GROUP BY c.id ORDER BY c.id"
+        ).fetchall()
+    return {name: int(count) for name, count in rows}
 
 
 def run_latent_dim(run: Run, env: str, evaluations: list) -> int:

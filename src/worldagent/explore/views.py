@@ -100,6 +100,38 @@ def thresholds(selection: Selection, names: Sequence[str]) -> dict[str, dict]:
     return found
 
 
+# The map's campaign markers: each shape filled, then each hollow (a campaign's marker stays one of these).
+# plots.js's drawShape draws each name.
+MARKER_SHAPES = ("circle", "square", "triangle", "diamond", "down", "plus", "star", "hexagon", "left", "cross", "right")
+MARKERS = tuple({"shape": shape, "filled": filled} for filled in (True, False) for shape in MARKER_SHAPES)
+
+
+def campaign_markers(count: int) -> list[dict]:
+    """The map marker ({"shape", "filled"}) of each of ``count`` campaigns, in order: all distinct up to
+    ``len(MARKERS)`` (22) campaigns; past that they start over (campaign 23 looks like campaign 1: the map's
+    legend says so, and a campaign's worlds are told apart by hiding the others)."""
+    return [MARKERS[c % len(MARKERS)] for c in range(count)]
+
+
+def worse_ends(selection: Selection | None, atlases: Sequence[tuple[str, bool]], names: Sequence[str]) -> dict[str, str]:
+    """{metric: "low" | "high"}: which end of each of ``names`` is the worse one, where the run says: the side
+    the failure event ``selection`` selects (``crash_rate > 0.5``: high), else the side a failure atlas
+    searched for (``atlases``: (metric, maximize) of each; minimised: low). Metrics it says nothing of are left out.
+
+    The explorer paints the worse end yellow (viridis's bright end), as the report's atlas figure does
+    (``reports/atlas.py``: viridis_r when the atlas minimised).
+    """
+    found: dict[str, str] = {}
+    for clause in selection.clauses if selection is not None else ():
+        metric = clause.metric or clause.name
+        if metric in names and clause.op in ("<", "<=", ">", ">="):
+            found.setdefault(metric, "low" if clause.op[0] == "<" else "high")
+    for metric, maximize in atlases:
+        if metric in names:
+            found.setdefault(metric, "high" if maximize else "low")
+    return found
+
+
 def nearest(latents: np.ndarray, candidates: np.ndarray, beyond: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
     """(index into ``candidates`` f[m, d], distance) of the nearest candidate farther than ``beyond``
     from each latent f[n, d]; (-1, inf) where there is none."""

@@ -2,12 +2,14 @@
 // axes) and world.js (the World view: sliders, plays, legends, the animation) load first.
 // State lives in the URL hash (#view=world&env=racing&w=12 or &z=...&agent=run), so a link reopens a view.
 // Every answer is tied to what asked for it: opening a world (or env) bumps `state.generation`, each play
-// `state.playSeq`; an answer for an older one is dropped, a superseded play's request is aborted here and,
-// if it still waits on the server, skipped there (it carries this page's CLIENT id and its seq).
+// `state.playSeq`, each view's load its `ticket`; an answer for an older one is dropped, a superseded play's
+// request is aborted here and, if it still waits on the server, skipped there (it carries this page's CLIENT id
+// and its seq). The status line belongs to the view on screen and its latest request: a view change restates or
+// clears it, a new world clears it, and an answer no longer current writes none.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-// plots.js (loaded first) gives SHAPES, SYMBOLS, fmt, esc, colourScale, renderColourBar, niceTicks, renderTicks, drawShape, drawCross.
+// plots.js (loaded first) gives fmt, esc, colourScale, renderColourBar, niceTicks, renderTicks, drawShape, drawMarker, drawCross.
 const state = {
   run: null, env: null, map: null, metric: null, world: null, z: null, baseZ: null, players: [null, null], atlas: null, diff: null,
   generation: 0, playSeq: 0, played: false, hidden: new Set(), tickets: {}, stats: { plays: 0, shown: 0, dropped: 0 },
@@ -42,6 +44,11 @@ function ticket(name) {
   return () => state.tickets[name] === mine && state.env === env;
 }
 
+function viewError(view, fresh, error) {
+  // a failed load says so in the status line only while it is the latest of its kind and its view is on screen
+  if (fresh() && state.view === view) status(error.message, true);
+}
+
 function envInfo() { return state.run.envs.find((e) => e.name === state.env); }
 function zParam(z) { return z.map((v) => v.toFixed(3)).join(","); }
 
@@ -54,9 +61,11 @@ function writeHash(params) {
 // -- views --------------------------------------------------------------------------------
 
 function show(view) {
+  if (view === "diff" && !(envInfo().diffs || []).length) view = "map";  // this environment has no diff: its tab is hidden
   for (const button of document.querySelectorAll("#tabs button")) button.classList.toggle("active", button.dataset.view === view);
   for (const section of document.querySelectorAll(".view")) section.hidden = section.id !== `view-${view}`;
   state.view = view;
+  status(view === "map" && state.map ? mapStatus() : "");  // no other view's (or an earlier request's) text stays
   if (view === "map" && state.map) drawMap();
   if (view === "atlas") loadAtlas();
   if (view === "failures") loadFailures();
@@ -81,7 +90,8 @@ async function selectEnv(name) {
   $("event").placeholder = info.failure || "e.g. return < 0";
   $("diff-event").placeholder = info.failure || "e.g. return < 0";
   $("diff-tab").hidden = !info.diffs.length;
-  $("diff-campaign").innerHTML = info.diffs.map((d) => `<option>${d}</option>`).join("");
+  $("diff-campaign").innerHTML = info.diffs.map((d) => `<option>${esc(d)}</option>`).join("");
+  clearTables();
   buildSliders(info.latent_dim);
   worldLegend();
   state.atlas = null;
@@ -93,7 +103,17 @@ async function selectEnv(name) {
   state.map = map;
   campaignLegend();
   drawMap();
-  status(`${name}: ${info.worlds} stored evaluations`);
+  if (state.view === "map" || !state.view) status(mapStatus());
+}
+
+function mapStatus() { return `${state.env}: ${envInfo().worlds} stored evaluations`; }
+
+function clearTables() {
+  // another environment: no table or summary of the previous one stays, and its answers still on the way are dropped
+  for (const name of ["failures", "diff"]) ticket(name);
+  state.diff = null;
+  for (const id of ["failures-table", "diff-table"]) $(id).innerHTML = "";
+  for (const id of ["failures-summary", "diff-summary"]) $(id).textContent = "";
 }
 
 // -- map ----------------------------------------------------------------------------------
@@ -122,7 +142,8 @@ function drawMap() {
   if (!n) { ctx.fillText("no stored worlds", 20, 20); return; }
   const values = map.metrics[state.metric] || [];
   const threshold = (info.thresholds || {})[state.metric];
-  const scale = colourScale(values, $("map-scale").value === "auto" ? (threshold ? "diverging" : "quantile") : $("map-scale").value, threshold);
+  const kind = $("map-scale").value === "auto" ? (threshold ? "diverging" : "quantile") : $("map-scale").value;
+  const scale = colourScale(values, kind, threshold, worseEnd(state.metric) === "low");  // the worse end yellow, as the report
   const place = mapScale();
   drawMapAxes(ctx, place);
   state.screen = new Array(n).fill(null);
@@ -131,17 +152,23 @@ function drawMap() {
     if (!mapVisible(i)) continue;
     const [px, py] = place(map.x[i], map.y[i]);
     state.screen[i] = [px, py];
-    drawShape(ctx, SHAPES[map.campaign[i] % SHAPES.length], px, py, 3.2);
-    ctx.fillStyle = scale.colourOf(i);
-    ctx.fill();
-    if (map.failing && map.failing[i]) { ctx.strokeStyle = FAIL_RING; ctx.lineWidth = 1.6; ctx.stroke(); }
+    drawMarker(ctx, map.markers[map.campaign[i]], px, py, 3.2, scale.colourOf(i), map.failing && map.failing[i] ? FAIL_RING : null);
   }
-  renderColourBar($("map-colourbar"), `${state.metric}: each world's mean over its episodes`, scale.bar, threshold ? "" : "dark purple: lowest, yellow: highest.");
+  renderColourBar($("map-colourbar"), `${state.metric}: each world's mean over its episodes`, scale.bar, threshold ? "" : worseNote(state.metric));
   canvas.dataset.metric = state.metric;
   canvas.dataset.scale = scale.kind;
   failingLegend();
   shareLegend();
-  drawMarker(ctx, place);
+  drawOpenWorld(ctx, place);
+}
+
+function worseEnd(metric) { return (envInfo().worse || {})[metric] || null; }
+
+function worseNote(metric) {
+  // which end is the worse one (the failure event's side, or the side a failure atlas searched), painted yellow as the report does
+  const worse = worseEnd(metric);
+  if (!worse) return "dark purple: lowest, yellow: highest (this run does not say which end is worse).";
+  return `yellow: the worse end (${worse === "low" ? "lowest" : "highest"} ${metric}), dark purple: the better end, as in the report's figures.`;
 }
 
 function shareLegend() {
@@ -168,11 +195,16 @@ function drawMapAxes(ctx, place) {
 }
 
 function campaignLegend() {
-  // one marker shape per campaign; a click on a campaign hides or shows its worlds
+  // one marker per campaign (its shape, filled or hollow: views.campaign_markers); a click on a campaign hides or shows its worlds
   const map = state.map, counts = map.campaigns.map(() => 0);
   map.campaign.forEach((c) => counts[c]++);
-  $("map-campaigns").innerHTML = "<h4>campaigns (marker shape)</h4>" + map.campaigns.map((name, c) =>
-    `<label class="row"><input type="checkbox" data-campaign="${c}" checked><span class="sym">${SYMBOLS[SHAPES[c % SHAPES.length]]}</span>${esc(name)} (${counts[c]})</label>`).join("");
+  const repeats = map.campaigns.length > map.distinct_markers ?
+    `<div class="row">campaigns past the ${map.distinct_markers}th reuse the markers of the first ones: untick campaigns to tell them apart</div>` : "";
+  $("map-campaigns").innerHTML = "<h4>campaigns (marker: shape, filled or hollow)</h4>" + map.campaigns.map((name, c) =>
+    `<label class="row"><input type="checkbox" data-campaign="${c}" checked><canvas class="mk" width="16" height="16" data-campaign="${c}"></canvas>${esc(name)} (${counts[c]})</label>`).join("") + repeats;
+  for (const canvas of $("map-campaigns").querySelectorAll("canvas")) {
+    drawMarker(canvas.getContext("2d"), map.markers[Number(canvas.dataset.campaign)], 8, 8, 4.5, "#555", null);
+  }
   for (const box of $("map-campaigns").querySelectorAll("input")) {
     box.addEventListener("change", () => { const c = Number(box.dataset.campaign); box.checked ? state.hidden.delete(c) : state.hidden.add(c); drawMap(); });
   }
@@ -186,7 +218,7 @@ function failingLegend() {
     `<div class="row"><span class="sym" style="color:${FAIL_RING}">◯</span>large red ring: the world open in the World view</div>`;
 }
 
-function drawMarker(ctx, place) {
+function drawOpenWorld(ctx, place) {
   // the world open in the World view (a stored one, or G(z) as the sliders left it), on the same projection
   if (!state.z || state.z.length !== state.map.centre.length) { $("map-canvas").dataset.marker = ""; return; }
   const centred = state.z.map((v, d) => v - state.map.centre[d]);
@@ -240,11 +272,12 @@ async function loadAtlas() {
     const atlas = state.atlas || await api(`/api/${state.env}/atlas`);
     if (!fresh()) return;
     state.atlas = atlas;
-  } catch (error) { status(error.message, true); return; }
+  } catch (error) { viewError("atlas", fresh, error); return; }
   const atlas = state.atlas, [cols, rows] = atlas.size, w = canvas.width / cols, h = canvas.height / rows;
   const worst = atlas.maximize ? "highest" : "lowest";
-  // dark: the extreme the atlas searched for (its worst worlds), on a quantile scale so a long tail does not flatten the rest
-  const scale = colourScale(atlas.cells.map((c) => c.score), "quantile", null, atlas.maximize, "cells");
+  // yellow: the extreme the atlas searched for (its worst worlds), as the report's atlas figure paints it (viridis_r when it
+  // minimised); on a quantile scale so a long tail does not flatten the rest
+  const scale = colourScale(atlas.cells.map((c) => c.score), "quantile", null, !atlas.maximize, "cells");
   atlas.cells.forEach((cell, k) => {
     ctx.fillStyle = scale.colourOf(k);
     ctx.fillRect(cell.x * w, canvas.height - (cell.y + 1) * h, w - 1, h - 1);
@@ -256,7 +289,7 @@ async function loadAtlas() {
   $("atlas-xlabel").textContent = `${atlas.descriptors[0]} (descriptor of the world, ${cols} cells)`;
   $("atlas-ylabel").textContent = atlas.descriptors[1] ? `${atlas.descriptors[1]} (${rows} cells)` : "one row";
   renderColourBar($("atlas-colourbar"), `${atlas.metric}: each cell's ${atlas.maximize ? "best" : "worst"} world`, scale.bar,
-    `Dark: the ${worst} ${atlas.metric}, the worst worlds the atlas found; empty cells: no world found there.`);
+    `Yellow: the ${worst} ${atlas.metric}, the worst worlds the atlas found (as in the report's atlas figure); empty cells: no world found there.`);
   $("atlas-title").textContent = `${atlas.name}: ${atlas.cells.length} of ${cols * rows} cells filled, ${atlas.metric} from ${fmt(Math.min(...atlas.cells.map((c) => c.score)))} to ${fmt(Math.max(...atlas.cells.map((c) => c.score)))}`;
 }
 
@@ -302,7 +335,8 @@ async function loadFailures() {
           `<td>${picture(row.nearest_passing)}</td>` + metricNames.map((m) => `<td class="num">${fmt(row.nearest_metrics[m])}</td>`).join("") + `<td class="num">${fmt(row.distance)}</td>`) +
         "</tr>").join("");
   } catch (error) {
-    status(error.message, true);
+    if (!fresh()) return;
+    viewError("failures", fresh, error);
     table.innerHTML = "";
   }
 }
@@ -310,13 +344,19 @@ async function loadFailures() {
 // -- diff: two agents' regressed worlds -----------------------------------------------------
 
 async function loadDiff() {
+  // the table is the latest request's (campaign, event, env) or empty while it loads: never an earlier request's
   const event = $("diff-event").value.trim(), campaign = $("diff-campaign").value;
   const query = new URLSearchParams({ limit: "20", ...(campaign ? { campaign } : {}), ...(event ? { event } : {}) });
-  const table = $("diff-table");
+  const table = $("diff-table"), fresh = ticket("diff");
+  state.diff = null;
+  table.innerHTML = "";
+  $("diff-summary").textContent = `loading ${campaign || "the first diff"} ...`;
   try {
     const found = await api(`/api/${state.env}/diff?${query}`);
+    if (!fresh()) return;
     state.diff = found;
-    $("diff-summary").textContent = `${found.campaign}: ${found.regressed} of ${found.worlds} worlds regressed (${found.event}), ${found.improved} improved`;
+    const pair = found.pair ? ` · A: ${found.pair.A}, B: ${found.pair.B}` : "";
+    $("diff-summary").textContent = `${found.campaign}: ${found.regressed} of ${found.worlds} worlds regressed (${found.event}), ${found.improved} improved${pair}`;
     const names = found.rows.length ? Object.keys(found.rows[0].a) : [];
     const picture = (i) => `<img loading="lazy" data-world="${i}" src="/api/${state.env}/world/${i}.png?size=72" alt="world ${i}"> ${i}`;
     table.innerHTML = `<tr><th>#</th><th>regressed world</th><th>log p(z)</th>${names.map((m) => `<th>${m} A → B</th>`).join("")}<th>nearest world where B passes</th><th>latent distance</th></tr>` +
@@ -325,8 +365,9 @@ async function loadDiff() {
         (row.nearest_passing === null ? "<td>none</td><td></td>" : `<td>${picture(row.nearest_passing)}</td><td class="num">${fmt(row.distance)}</td>`) +
         "</tr>").join("");
   } catch (error) {
-    status(error.message, true);
-    table.innerHTML = "";
+    if (!fresh()) return;
+    viewError("diff", fresh, error);
+    $("diff-summary").textContent = "";
   }
 }
 

@@ -1,12 +1,11 @@
 // worldagent explore: what the plots need to explain themselves (colour scales, colour bars, axes, marker shapes).
+// Each campaign's marker (shape, filled or hollow) comes from the server (views.campaign_markers); drawShape draws its shape.
 // Plain functions of numbers and elements; explorer.js draws with them. No dependencies.
 "use strict";
 
 const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
 // Diverging around a failure threshold: red on the failing side, blue on the passing side, grey at the threshold.
 const DIVERGING = { fail: [178, 24, 43], mid: [205, 205, 205], pass: [33, 102, 172] };
-const SHAPES = ["circle", "square", "triangle", "diamond", "down", "plus", "star", "hexagon", "left", "cross", "right"];  // one per campaign
-const SYMBOLS = { circle: "●", square: "■", triangle: "▲", diamond: "◆", down: "▼", plus: "✚", star: "★", hexagon: "⬢", left: "◀", cross: "✖", right: "▶" };
 
 function fmt(v) { return v === null || v === undefined ? "n/a" : Math.abs(v) >= 1000 || Number.isInteger(v) ? String(Math.round(v * 100) / 100) : Number(v).toPrecision(3); }
 function esc(text) { return String(text).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]); }
@@ -127,6 +126,19 @@ function drawShape(ctx, shape, x, y, r) {
   } else ctx.arc(x, y, r, 0, 2 * Math.PI);
 }
 
+function drawMarker(ctx, marker, x, y, r, colour, ring) {
+  // a campaign's marker in `colour`: the shape filled, or hollow (its outline in the colour, thick enough to read it);
+  // `ring` (a failing world) outlines it, hollow ones from outside so their colour stays seen
+  drawShape(ctx, marker.shape, x, y, r);
+  if (marker.filled) {
+    ctx.fillStyle = colour; ctx.fill();
+    if (ring) { ctx.strokeStyle = ring; ctx.lineWidth = 1.6; ctx.stroke(); }
+    return;
+  }
+  if (ring) { ctx.strokeStyle = ring; ctx.lineWidth = 4.2; ctx.stroke(); drawShape(ctx, marker.shape, x, y, r); }
+  ctx.strokeStyle = colour; ctx.lineWidth = 1.8; ctx.stroke();
+}
+
 function drawCross(ctx, x, y, r, colour) {
   // an outcome mark (a crash): a cross with a dark edge, seen on any background
   for (const [width, style] of [[r * 0.75, "rgba(0,0,0,0.7)"], [r * 0.4, colour]]) {
@@ -135,4 +147,4 @@ function drawCross(ctx, x, y, r, colour) {
   }
 }
 
-window.plots = { SHAPES, SYMBOLS, fmt, esc, viridis, ranks, colourScale, renderColourBar, niceTicks, renderTicks, drawShape, drawCross, fails };
+window.plots = { fmt, esc, viridis, ranks, colourScale, renderColourBar, niceTicks, renderTicks, drawShape, drawMarker, drawCross, fails };

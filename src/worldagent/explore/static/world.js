@@ -26,8 +26,9 @@ function setSliders(z) {
 }
 
 function newWorld() {
-  // the world on screen changes: every play of the previous one is abandoned, and its numbers leave the screen
+  // the world on screen changes: every play of the previous one is abandoned, and its numbers and status leave the screen
   state.generation++;
+  status("");
   if (playing) playing.abort();
   playing = null;
   cancelAnimationFrame(animation);
@@ -134,10 +135,11 @@ async function play() {
   const controller = playing = new AbortController();
   const body = { ...source(), episodes: Number($("episodes").value), seed: Number($("seed").value), size: 384, client: CLIENT, seq };
   const current = () => seq === state.playSeq && generation === state.generation;
+  const say = (text, isError = false) => { if (current() && state.view === "world") status(text, isError); };  // a superseded play says nothing
   state.stats.plays++;
   let answered = false;
-  status(`playing ${chosen.join(" and ")} ...`);
-  playStatus(chosen, body.episodes).then((text) => { if (current() && !answered) status(text); });
+  say(`playing ${chosen.join(" and ")} ...`);
+  playStatus(chosen, body.episodes).then((text) => { if (!answered) say(text); });
   try {
     const results = await Promise.all(agents.map((agent) => agent ? api(`/api/${state.env}/play`, {
       method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ ...body, agent }), signal: controller.signal,
@@ -154,10 +156,10 @@ async function play() {
     episodePicker(results);
     playLegend(results);
     animate(longest);
-    status(`played ${body.episodes} episode(s) of ${chosen.join(" and ")}`);
+    say(`played ${body.episodes} episode(s) of ${chosen.join(" and ")}`);
   } catch (error) {
     if (error.name === "AbortError" || error.status === 409 || !current()) { state.stats.dropped++; return; }  // superseded
-    status(error.message, true);
+    say(error.message, true);
   }
 }
 
@@ -176,6 +178,12 @@ function markSymbol(style) {
   return `<span class="sym" style="color:${esc(style.colour)};text-shadow:0 0 1px #000">${shape}</span>`;
 }
 
+function agentColour(a) {
+  // agent a's colour: the one the env's own pictures (and so the report's figures) give it, else the page's trail colours
+  const own = (envInfo().key || {}).agent_colours || [];
+  return own.length ? own[a % own.length] : TRAILS[a % TRAILS.length];
+}
+
 function worldLegend() {
   // what the env's picture and animation mean (EnvSpec.pictures: legend, mark_styles, agents, outcomes)
   const key = envInfo().key || { colours: {}, marks: {}, agents: [], outcomes: {} };
@@ -187,7 +195,7 @@ function worldLegend() {
   const outcomes = Object.values(key.outcomes);
   if (outcomes.length) rows.push(...(marks.length ? [] : ["<h4>during a play</h4>"]), ...outcomes.map((s) => `<div class="row">${markSymbol(s)}${esc(s.label)}</div>`));
   if (key.agents.length > 1) {
-    rows.push("<h4>agents (trail and dot colours)</h4>", ...key.agents.map((name, a) => `<div class="row">${swatch(TRAILS[a % TRAILS.length])}${esc(name)}</div>`));
+    rows.push("<h4>agents (trail and dot colours)</h4>", ...key.agents.map((name, a) => `<div class="row">${swatch(agentColour(a))}${esc(name)}</div>`));
     rows.push('<div class="row">each agent keeps its colour in every episode; "show" picks one episode</div>');
   } else {
     rows.push(`<div class="row">${esc(key.agents[0] || "the agent")}: one colour per episode (listed after a play); a dot is where it is at this step, a line where it went</div>`);
@@ -274,7 +282,7 @@ function drawFrame(i, result, frame) {
   for (const [episode, e] of shown) {
     const last = Math.min(frame, episode.path.length - 1), agents = episode.path[0].length;
     for (let a = 0; a < agents; a++) {
-      const colour = TRAILS[(agents > 1 ? a : e) % TRAILS.length];
+      const colour = agents > 1 ? agentColour(a) : TRAILS[e % TRAILS.length];
       const first = episode.path.length > LONG_EPISODE ? Math.max(0, last - RECENT_TRAIL) : 0;  // long episodes keep a recent trail only
       trail(ctx, episode, a, first, last, scale);
       ctx.lineJoin = "round";

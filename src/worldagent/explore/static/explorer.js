@@ -355,6 +355,11 @@ async function loadDiff() {
     const found = await api(`/api/${state.env}/diff?${query}`);
     if (!fresh()) return;
     state.diff = found;
+    if (found.campaigns.join("\n") !== envInfo().diffs.join("\n")) {  // a diff written since the page loaded joins the list
+      envInfo().diffs = found.campaigns;
+      $("diff-campaign").innerHTML = found.campaigns.map((d) => `<option>${esc(d)}</option>`).join("");
+      $("diff-campaign").value = found.campaign;
+    }
     const pair = found.pair ? ` · A: ${found.pair.A}, B: ${found.pair.B}` : "";
     $("diff-summary").textContent = `${found.campaign}: ${found.regressed} of ${found.worlds} worlds regressed (${found.event}), ${found.improved} improved${pair}`;
     const names = found.rows.length ? Object.keys(found.rows[0].a) : [];

@@ -127,13 +127,23 @@ def confirm_selection(
     return [world.selected for world in kept], confirmation_summary(confirmed, kept, selection, failure, repeats, seed)
 
 
-def none_survived(summary: dict, selection: Selection) -> WorldagentError:
+class NoneSurvived(WorldagentError):
+    """A confirmed selection kept no world: a finding about the agent and the selection, which callers
+    that run many steps (``reproduce``) record and go on from; ``summary`` is the confirmation's."""
+
+    def __init__(self, message: str, summary: dict):
+        super().__init__(message)
+        self.summary = summary
+
+
+def none_survived(summary: dict, selection: Selection) -> NoneSurvived:
     """The one-line error of a confirmed selection that kept no world."""
     rates = summary["property"]
-    return WorldagentError(
+    return NoneSurvived(
         f"none of the {summary['selected']} worlds with '{selection.describe()}' kept it on {summary['repeats']} fresh episodes "
         f"(per-episode rate found {rates['selected_found']['mean']:.3g}, confirmed {rates['selected_confirmed']['mean']:.3g}); "
-        "loosen the selection, try more worlds (--candidates, --search-budget), or pass --confirm 0 for the unconfirmed selection."
+        "loosen the selection, try more worlds (--candidates, --search-budget), or pass --confirm 0 for the unconfirmed selection.",
+        summary,
     )
 
 

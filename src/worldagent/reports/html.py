@@ -317,6 +317,11 @@ def comparison_section(run_dir: Path, results: dict) -> str:
 
 def influence_section(run_dir: Path, results: dict) -> str:
     def render(env: str, res: dict) -> str:
+        outputs = res["phases"]["influence"].get("outputs", {})
+        if "skipped" in outputs:  # e.g. no selected world kept the property on its fresh episodes
+            return missing(f"skipped: {outputs['skipped']}")
+        if "influence" not in res:
+            return missing("no influence.json")
         result = res["influence"]
         worlds = result["worlds"]
         rows = []
@@ -340,7 +345,8 @@ def influence_section(run_dir: Path, results: dict) -> str:
             )
         return (
             failed + f"<p>Selection <code>{esc(result['selection']['describe'])}</code>: {worlds['selected']} of {worlds['tried']} candidate worlds "
-            f"became the influenced training distribution; agents trained with seeds {esc(', '.join(map(str, result['config']['seeds'])))}, "
+            f"became the influenced training distribution{confirmed_selection(worlds)}; agents trained with seeds "
+            f"{esc(', '.join(map(str, result['config']['seeds'])))}, "
             f"evaluated on {result['config']['eval_worlds']} random worlds x {result['config']['repeats']} episodes.</p>"
             f"<p data-field='influence-regime'>Both arms' training: {esc(training_regime(result))}.</p>"
             + table(["metric", "default training (mean over seeds)", "95% CI ±", "influenced training", "95% CI ±"], rows, raw_cells=True)
@@ -350,7 +356,15 @@ def influence_section(run_dir: Path, results: dict) -> str:
             )
         )
 
-    return per_env(results, "influence", render, "influence", "no influence.json")
+    return per_env(results, "influence", render)
+
+
+def confirmed_selection(worlds: dict) -> str:
+    """ " (those of the 118 selected whose property held on 32 fresh episodes each)", or nothing unconfirmed."""
+    confirmation = worlds.get("confirmation")
+    if confirmation is None:
+        return " (as found: not confirmed on fresh episodes)"
+    return f" (those of the {confirmation['selected']} selected whose property held on {confirmation['repeats']} fresh episodes each)"
 
 
 def atlas_section(run_dir: Path, results: dict) -> str:

@@ -391,27 +391,35 @@ def compare_phase(ctx: EnvContext) -> dict:
 
 
 def influence_phase(ctx: EnvContext) -> dict:
-    """Retrain agents on worlds with a desired property and compare them with default training (§6.2, Figure 8)."""
+    """Retrain agents on worlds with a desired property and compare them with default training (§6.2, Figure 8).
+    The agents train only on selected worlds whose property holds on ``influence_confirm`` fresh episodes each
+    (``influence.confirmation``); when none does, that is the phase's finding, recorded, and the run goes on."""
     from worldagent import experiments
+    from worldagent.influence.confirmation import NoneSurvived
+    from worldagent.influence.statistics import json_safe
     from worldagent.reports.influence import influence_figure
 
     budgets, layout = ctx.budgets, ctx.layout
     setup = ctx.setup()
-    result = experiments.influence(
-        layout.influence_dir,
-        setup,
-        ctx.preset.selection(ctx.env),
-        algo=ctx.algo,
-        episodes=budgets.influence_episodes,
-        seeds=tuple(budgets.influence_seeds),
-        candidates=budgets.influence_candidates,
-        search_budget=budgets.influence_search_budget,
-        search=budgets.influence_search,
-        eval_worlds=budgets.influence_eval_worlds,
-        config=ctx.train_config(budgets.influence_episodes),
-        seed=ctx.seed,
-        progress=ctx.progress,
-    )
+    try:
+        result = experiments.influence(
+            layout.influence_dir,
+            setup,
+            ctx.preset.selection(ctx.env),
+            algo=ctx.algo,
+            episodes=budgets.influence_episodes,
+            seeds=tuple(budgets.influence_seeds),
+            candidates=budgets.influence_candidates,
+            search_budget=budgets.influence_search_budget,
+            search=budgets.influence_search,
+            eval_worlds=budgets.influence_eval_worlds,
+            config=ctx.train_config(budgets.influence_episodes),
+            seed=ctx.seed,
+            progress=ctx.progress,
+            confirm=ctx.preset.influence_confirm,
+        )
+    except NoneSurvived as error:
+        return {"skipped": str(error), "confirmation": json_safe(error.summary), "summary": f"no influenced agents: {error}"}
     examples = experiments.example_worlds(layout.influence_dir, setup.spec)
     figure = influence_figure(result, examples, setup.spec, layout.figure("influence"))
     return {
@@ -426,7 +434,14 @@ def influence_phase(ctx: EnvContext) -> dict:
 def influence_summary(result: dict) -> str:
     """One line: how many worlds were selected, and each compared metric, default -> influenced."""
     summary = result.get("summary", {})
-    parts = [f"{result.get('worlds', {}).get('selected', '?')} worlds selected"]
+    worlds = result.get("worlds", {})
+    confirmation = worlds.get("confirmation")
+    if confirmation is None:
+        parts = [f"{worlds.get('selected', '?')} worlds selected"]
+    else:  # the agents trained on the survivors only
+        parts = [
+            f"{confirmation['survived']} of {confirmation['selected']} selected worlds kept the property on {confirmation['repeats']} fresh episodes"
+        ]
     for metric, by_label in summary.items():
         parts.append(f"{metric} {by_label['default']['mean']:.3g} -> {by_label['influenced']['mean']:.3g}")
     parts += [f"WARNING: the {name} agent {why}" for name, why in result.get("failed_training", {}).items()]

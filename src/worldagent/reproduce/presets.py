@@ -149,9 +149,11 @@ class Preset:
             env by ``check_curriculum`` before any phase runs.
         repair: the repair of every env's G(z) by name (``reproduce --repair``, ``EnvSpec.repairs``,
             e.g. ``open``); None: each env's default (the paper's ``nearest`` for racing and harvest).
-        confirm: fresh episodes each reported world (strategic, compare, influence's selection) is
-            replayed on (``analysis.confirm``; ours, not the paper's: it reports the found figure only).
+        confirm: fresh episodes each reported world (strategic, compare) is replayed on
+            (``analysis.confirm``; ours, not the paper's: it reports the found figure only).
         elite_confirm: fresh episodes each atlas elite is replayed on (the corrected archive).
+        influence_confirm: fresh episodes each world of influence's selection is replayed on, only those
+            that keep the property trained on (``influence.confirmation``); 0: the raw selection, as the paper.
     """
 
     name: str
@@ -167,12 +169,15 @@ class Preset:
     repair: str | None = None
     confirm: int = 64
     elite_confirm: int = 32
+    influence_confirm: int = 32  # a selection is as many worlds as an atlas's elites
 
     def __post_init__(self):
         if self.repeats < 1 or self.seed < 0:
             raise WorldagentError(f"repeats={self.repeats}, seed={self.seed}; repeats must be >= 1 and the seed >= 0.")
         if self.confirm < 1 or self.elite_confirm < 1:
             raise WorldagentError(f"confirm={self.confirm}, elite_confirm={self.elite_confirm}; replay reported worlds on at least 1 episode.")
+        if self.influence_confirm < 0:
+            raise WorldagentError(f"influence_confirm={self.influence_confirm}; pass 0 (the raw selection) or the fresh episodes per selected world.")
         if self.algo is not None and not any(self.algo in registry.get(env).algorithms for env in self.envs):
             known = sorted({a for env in self.envs for a in registry.get(env).algorithms})
             raise WorldagentError(f"algorithm {self.algo!r} trains none of {', '.join(self.envs)}; use one of: {', '.join(known)}.")
@@ -309,6 +314,7 @@ class Preset:
                 "repeats": self.repeats,
                 "algo": self.algo_of(env),
                 **({"settings": self.settings_of(env)} if self.settings_of(env) else {}),
+                **({"confirm": self.influence_confirm} if self.influence_confirm else {}),  # absent unconfirmed: earlier runs still match
             },
             "atlas": {
                 "budget": b.atlas_budget,
@@ -357,7 +363,7 @@ def make_curriculum_of(env: str, request: dict, worlds: Any) -> Any:
 SETTINGS = {
     "tiny": (
         "Every phase at a toy budget (CI and tests); the numbers mean nothing.",
-        {"repeats": 2, "vae_hidden": (64, 32), "vae_batch_size": 32, "confirm": 4, "elite_confirm": 2},
+        {"repeats": 2, "vae_hidden": (64, 32), "vae_batch_size": 32, "confirm": 4, "elite_confirm": 2, "influence_confirm": 0},
     ),
     "quick": ("Small budgets that finish both environments in under 10 minutes on 2 CPU cores and still show every phenomenon.", {}),
     "paper": (

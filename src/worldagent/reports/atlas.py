@@ -52,10 +52,32 @@ def atlas_figure(summary: dict, setup: Any, metric: str, maximize: bool, loaded:
     """
     from worldagent.reports.figures import _pyplot
 
-    plt = _pyplot()
-    grid, archive, spec = summary["grid"], summary["archive"], setup.spec
+    archive, spec = summary["archive"], setup.spec
     picks = distinct_picks(archive, maximize, count) if spec.pictures.episodes is not None else []
-    figure = plt.figure(figsize=(4.2 * max(len(picks), 2), 8.4), dpi=110)
+    panels = []
+    for pick in picks:
+        evaluation, keys = loaded(summary["evaluations"][int(archive.best[pick])])
+        world = spec.world_from_arrays(evaluation.world)
+        panels.append((world, replay(spec, setup.env, setup.policy, world, keys, setup.params)))
+    figure = draw_atlas(summary, spec, metric, maximize, dict(zip(picks, panels)))
+    path = write_atomically(Path(out), lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
+    _pyplot().close(figure)
+    return path
+
+
+def draw_atlas(summary: dict, spec: Any, metric: str, maximize: bool, panels: dict[int, tuple[Any, Any]]) -> Any:
+    """The atlas figure (a matplotlib ``Figure``): the heat map on top, below it one panel per pick.
+
+    Args:
+        summary: one campaign's entry of ``experiments.atlas_summary`` (grid, archive, coverage, QD-score).
+        spec: the env's ``EnvSpec`` (``pictures.episodes`` draws each panel).
+        panels: {archive entry: (its world, its replayed ``Episodes``)}, in the order drawn.
+    """
+    from worldagent.reports.figures import _pyplot, fit_legend
+
+    plt = _pyplot()
+    grid, archive = summary["grid"], summary["archive"]
+    figure = plt.figure(figsize=(4.2 * max(len(panels), 2), 8.4), dpi=110)
     figure.subplots_adjust(hspace=0.35)
     top = figure.add_subplot(2, 1, 1)
     heat = heat_grid(archive, grid, maximize)
@@ -70,13 +92,10 @@ def atlas_figure(summary: dict, setup: Any, metric: str, maximize: bool, loaded:
         f"QD-score {summary['qd_score']:.4g}{failing}",
         fontsize=9,
     )
-    evaluations = summary["evaluations"]
-    for slot, pick in enumerate(picks):
-        evaluation, keys = loaded(evaluations[int(archive.best[pick])])
-        axis = figure.add_subplot(2, len(picks), len(picks) + slot + 1)
-        world = spec.world_from_arrays(evaluation.world)
-        episodes = replay(spec, setup.env, setup.policy, world, keys, setup.params)
+    for slot, (pick, (world, episodes)) in enumerate(panels.items()):
+        axis = figure.add_subplot(2, len(panels), len(panels) + slot + 1)
         spec.pictures.episodes(axis, world, episodes)
+        fit_legend(axis)  # the env draws its legend for a panel of its own: in this row it must fit its column
         where = marker_at(archive.measures[pick], grid)  # the title below keeps the true values
         top.scatter(*where, marker="o", s=90, facecolors="none", edgecolors="red")
         top.annotate(str(slot + 1), where, color="red", fontsize=9, xytext=(4, 4), textcoords="offset points")
@@ -84,9 +103,7 @@ def atlas_figure(summary: dict, setup: Any, metric: str, maximize: bool, loaded:
         axis.set_title(f"{slot + 1}: score {archive.scores[pick]:.4g}\n{described}", fontsize=8)
         axis.set_xticks([])
         axis.set_yticks([])
-    path = write_atomically(Path(out), lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
-    plt.close(figure)
-    return path
+    return figure
 
 
 def counterfactual_figure(setup: Any, pairs: list[dict], out: Path | str) -> Path:
@@ -99,25 +116,41 @@ def counterfactual_figure(setup: Any, pairs: list[dict], out: Path | str) -> Pat
     from worldagent.reports.figures import _pyplot
     from worldagent.search.objectives import generate
 
-    plt = _pyplot()
-    spec = setup.spec
-    figure, axes = plt.subplots(max(len(pairs), 1), 2, figsize=(8.4, 4.2 * max(len(pairs), 1)), dpi=100, squeeze=False)
+    spec, rows = setup.spec, []
     for row, pair in enumerate(pairs):
         found = pair["boundary"]
         latents = jnp.asarray(np.stack([found.failing, found.passing]), jnp.float32)
         worlds = jax.tree_util.tree_map(np.asarray, generate(setup.generator, latents))
+        drawn = []
         for col, (label, t) in enumerate((("fails", found.t_failing), ("passes", found.t_passing))):
             world = jax.tree_util.tree_map(lambda leaf, col=col: leaf[col], worlds)
             episodes = replay(spec, setup.env, setup.policy, world, scored_keys(pair["seed"], setup.repeats), setup.params)
-            axis = axes[row, col]
-            spec.pictures.episodes(axis, world, episodes)
             note = spec.episode_note({k: np.asarray(v) for k, v in episodes.metrics.items()}) if spec.episode_note else ""
-            axis.set_title(f"{row + 1}{'ab'[col]}: {label} (t = {t:.3f} on the segment){note}", fontsize=8)
+            drawn.append((world, episodes, f"{row + 1}{'ab'[col]}: {label} (t = {t:.3f} on the segment){note}"))
+        rows.append(drawn)
+    figure = draw_counterfactuals(spec, rows)
+    path = write_atomically(Path(out), lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
+    _pyplot().close(figure)
+    return path
+
+
+def draw_counterfactuals(spec: Any, rows: list[list[tuple[Any, Any, str]]]) -> Any:
+    """The counterfactual figure (a matplotlib ``Figure``): one row per pair, each panel ``(world, Episodes, title)``;
+    legends fitted to their panels and rows spaced so that a row's legends clear the next row's titles."""
+    from worldagent.reports.figures import _pyplot, fit_legend, space_rows
+
+    plt = _pyplot()
+    figure, axes = plt.subplots(max(len(rows), 1), 2, figsize=(8.4, 4.2 * max(len(rows), 1)), dpi=100, squeeze=False)
+    for r, panels in enumerate(rows):
+        for c, (world, episodes, title) in enumerate(panels):
+            axis = axes[r, c]
+            spec.pictures.episodes(axis, world, episodes)
+            fit_legend(axis)
+            axis.set_title(title, fontsize=8)
             axis.set_xticks([])
             axis.set_yticks([])
-    if not pairs:
+    if not rows:
         axes[0, 0].set_title("no failing cell with a passing world to compare", fontsize=9)
     figure.suptitle(f"{spec.name}: each failing world beside the nearest passing one (latent segment bisected)", fontsize=9)
-    path = write_atomically(Path(out), lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))
-    plt.close(figure)
-    return path
+    space_rows(figure, [list(row) for row in axes])
+    return figure

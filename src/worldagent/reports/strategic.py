@@ -31,7 +31,7 @@ from worldagent.evaluation.trajectories import Episodes, replay
 from worldagent.files import write_atomically, write_text
 from worldagent.store import Evaluation
 
-# Points: the figure is 1,500 px wide and shown at the report's ~1,050 px, so text is drawn at 0.7 of its size;
+# Points: the figure is about 1,500 px wide (cropped to what it draws) and shown at the report's ~1,050 px, so text is drawn at 0.7 of its size;
 # these stay readable there (titles and legends at 7-9 pt were not).
 TEXT, SMALL = 13, 11
 
@@ -254,7 +254,7 @@ def strategic_figure(
     Returns:
         The PNG's path.
     """
-    from worldagent.reports.figures import _pyplot
+    from worldagent.reports.figures import _pyplot, fit_legend
 
     if len(np.asarray(random_scores)) == 0:
         raise WorldagentError("no random-world scores to compare with; evaluate random worlds first.")
@@ -270,7 +270,10 @@ def strategic_figure(
     _distribution_panel(axes[2], random_scores, low, high, metric, confirmed)
     figure.suptitle(f"{spec.name}: strategic evaluation of {getattr(policy, 'name', 'the agents')} ({metric})", fontsize=TEXT + 2)
     figure.tight_layout(rect=(0, 0, 1, 0.95))
-    path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png"))
+    for axis in axes[:2]:  # the env draws its legend for a panel of its own: here it must fit its panel's width
+        fit_legend(axis)
+    figure.tight_layout(rect=(0, 0, 1, 0.95))
+    path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png", bbox_inches="tight"))  # legends below the panels kept
     plt.close(figure)
     return path
 

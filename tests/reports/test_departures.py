@@ -51,7 +51,9 @@ def test_each_gap_names_its_likely_cause_and_links_its_section():
     found = {d.row.key: d for d in departures(rows, results)}
     assert set(found) == {"harvest.random.mean_normalised", "harvest.influence.conflict_default", "harvest.influence.equality_default"}
     random = found["harvest.random.mean_normalised"]
-    assert random.anchor == "random" and "1,000 training episodes (the paper's: 5,000)" in random.cause and "best single episode" in random.cause
+    assert (
+        random.anchor == "random" and "1,000 training episodes (the paper preset's: 5,000)" in random.cause and "best single episode" in random.cause
+    )
     conflict = found["harvest.influence.conflict_default"]
     assert conflict.anchor == "influence" and conflict.cause.startswith("one seed per arm")
     assert all(row.note.startswith("one seed") for row in rows[1:])  # the headline table says so too
@@ -82,7 +84,7 @@ def test_a_run_with_the_paper_settings_may_call_a_gap_real():
     results = racing_as_paper()
     assert run_differences("racing", results["racing"]) == []
     cause = likely_cause(CRASHED, results)
-    assert "unexplained" in cause and "real difference" in cause and "the paper's:" not in cause
+    assert "unexplained" in cause and "real difference" in cause and "the paper preset's:" not in cause
     assert "every setting its phases recorded matches the paper's preset" in departures_section([CRASHED], results, "paper")
 
 
@@ -90,24 +92,27 @@ def test_each_setting_unlike_the_papers_is_named_and_the_gap_is_not_called_real(
     """The quick run's case: PPO on the route observation and a 10-epoch VAE, against ACKTR on rays and 25 epochs."""
     results = racing_as_paper(generator={"epochs": 10}, agent={"algo": "ppo", "options": {"observation": "route"}})
     cause = likely_cause(CRASHED, results)
-    assert "10 VAE epochs (the paper's: 25)" in cause
-    assert "training algorithm ppo (the paper's: acktr)" in cause
-    assert "env option observation route (the paper's: rays)" in cause
+    assert "10 VAE epochs (the paper preset's: 25)" in cause
+    assert "training algorithm ppo (the paper preset's: acktr)" in cause
+    assert "env option observation route (the paper preset's: rays)" in cause
     assert "real difference" not in cause
     # a setting the number does not depend on is listed in the box, not given as this number's cause
     results = racing_as_paper(strategic={"budget": 420})
     assert "420 worlds searched" not in likely_cause(CRASHED, results)
-    assert "420 worlds searched" in likely_cause(Headline("racing.min.normalised", "min", 0.37, 0.13), results)
+    minimum = Headline("racing.min.normalised", "min", 0.37, 0.13)
+    assert likely_cause(minimum, results) == "settings unlike the paper's preset: 420 worlds searched (the paper preset's: 2,100)"  # that field only
     box = departures_section([CRASHED], results, "quick")
     assert "1 of its settings differs" in box and "data-setting='racing/strategic/budget'" in box
 
 
-def test_an_omitted_option_is_the_envs_default_and_repeats_count():
-    """The quick preset records no options for racing (route, the default) where the paper's records rays; repeats are compared too."""
+def test_an_omitted_setting_is_its_default_and_repeats_and_repair_count():
+    """The quick preset records no options for racing (route, the default) where the paper's records rays; repeats and the repair
+    are compared too."""
     phases = racing_as_paper(random={"repeats": 2})["racing"]["phases"]
     phases["agent"]["config"].pop("options")
+    phases["generator"]["config"]["repair"] = "open"  # reproduce --repair open; the paper preset records none: its default, nearest
     found = {(d.phase, d.name): (d.ours, d.paper) for d in run_differences("racing", {"phases": phases})}
-    assert found == {("agent", "options.observation"): ("route", "rays"), ("random", "repeats"): (2, 8)}
+    assert found == {("agent", "options.observation"): ("route", "rays"), ("random", "repeats"): (2, 8), ("generator", "repair"): ("open", "nearest")}
 
 
 def test_a_phase_without_recorded_settings_leaves_the_gap_unexplained():
@@ -126,3 +131,7 @@ def test_the_generators_gate_warnings_join_the_box_and_the_causes():
     assert len(flagged) == 2 and "NLL 207.1 vs 177.5" in flagged[0] and "collapsed" in flagged[1]
     cause = likely_cause(CRASHED, results)
     assert "the generator failed its own gate (overfit)" in cause and "(collapsed)" in cause and "real difference" not in cause
+    # a generator the gate rejected and the run used anyway says why (the gate's recorded waiver)
+    results["racing"]["phases"]["generator"]["outputs"]["gate"] = {"verdict": "waived", "waiver": "expected at the tiny preset's toy budgets"}
+    box = departures_section([CRASHED], results, "tiny")
+    assert "collapsed: 0 of 10 latent dimensions active (used anyway: expected at the tiny preset&#x27;s toy budgets)" in box

@@ -52,6 +52,7 @@ WORDS = {
     ("influence", "seeds"): ("seeds per arm", True),
     ("influence", "search_budget"): ("extra search evaluations", True),
     ("influence", "algo"): ("training algorithm", False),
+    ("influence", "confirm"): ("fresh episodes confirming each selected world", True),
     ("atlas", "budget"): ("atlas worlds", True),
     ("atlas", "failure_worlds"): ("worlds per failure-rate estimate", True),
 }
@@ -106,10 +107,10 @@ class SettingDifference:
         return fmt(value)
 
     def text(self) -> str:
-        """ "1,000 training episodes (the paper's: 5,000)", or "training algorithm ppo (the paper's: acktr)"."""
+        """ "1,000 training episodes (the paper preset's: 5,000)", or "training algorithm ppo (the paper preset's: acktr)"."""
         ours, theirs = self.shown(self.ours), self.shown(self.paper)
-        said = f"{ours} {self.words}" if self.counted and self.ours is not None else f"{self.words} {ours}"
-        return f"{said} (the paper's: {theirs})"
+        said = f"{ours} {self.words}" if self.counted and isinstance(self.ours, (int, list)) else f"{self.words} {ours}"
+        return f"{said} (the paper preset's: {theirs})"
 
 
 def differs(ours: float | None, paper: float | None) -> bool:
@@ -141,8 +142,9 @@ def paper_config(env: str, phase: str) -> dict | None:
 
 
 def with_defaults(env: str, phase: str, config: dict) -> dict:
-    """``config`` as JSON holds it, with what a phase leaves out when it is the default written in: every env option
-    (``spec.check_options``), the env's default repair, the influence search's default."""
+    """``config`` as JSON holds it, with what ``Preset.phase_config`` leaves out when it is the default (so that earlier
+    runs still match) written in: every env option (``spec.check_options``), the env's default repair, the influence
+    search's default and no confirmation of the influence selection."""
     spec, filled = registry.get(env), dict(config)
     if phase == "agent":
         filled["options"] = spec.check_options(filled.get("options") or {})
@@ -150,6 +152,7 @@ def with_defaults(env: str, phase: str, config: dict) -> dict:
         filled.setdefault("repair", spec.default_repair)
     if phase == "influence":
         filled.setdefault("search", {f.name: f.default for f in dataclasses.fields(EnvBudgets)}["influence_search"])
+        filled.setdefault("confirm", 0)
     return json.loads(json.dumps(filled, default=list))
 
 
@@ -199,6 +202,14 @@ def generator_warnings(res: dict) -> list[str]:
     its phase recorded them and as ``quality.json`` holds them."""
     recorded = (res["phases"].get("generator", {}).get("outputs") or {}).get("warnings") or []
     return list(dict.fromkeys([*recorded, *((res.get("quality") or {}).get("warnings") or [])]))
+
+
+def generator_waiver(res: dict) -> str | None:
+    """Why a generator its gate rejected was used anyway (the gate's verdict, ``worlds.quality.gate``, as the generator
+    phase records it: a tiny preset's toy budgets, ``--accept-generator``); None: no waiver recorded."""
+    outputs = res["phases"].get("generator", {}).get("outputs") or {}
+    verdict = outputs.get("gate") or (res.get("quality") or {}).get("gate") or {}
+    return verdict.get("waiver") if isinstance(verdict, dict) else None
 
 
 def causes(row: Headline, results: dict) -> list[str]:
@@ -301,8 +312,9 @@ def settings_box(results: dict, preset: str | None) -> str:
 
 def generator_box(results: dict) -> str:
     """Each env's generator gate warnings (``generator_warnings``): every number of that env is drawn from that G(z)."""
+    waived = {env: f" (used anyway: {waiver})" if (waiver := generator_waiver(res)) else "" for env, res in results.items()}
     lines = "".join(
-        f"<li data-flag='generator-warning' data-env='{esc(env)}'>{esc(env)}: the generator failed its own gate: {esc(line)}</li>"
+        f"<li data-flag='generator-warning' data-env='{esc(env)}'>{esc(env)}: the generator failed its own gate: {esc(line + waived[env])}</li>"
         for env, res in results.items()
         for line in generator_warnings(res)
     )

@@ -151,6 +151,6 @@ def test_agents_keep_the_colours_of_the_envs_own_pictures():
 
     harvest = agent_colours(registry.get("harvest").pictures)
     assert len(harvest) == len(render.AGENT_COLOURS) == 4
-    for css, rgb in zip(harvest, render.AGENT_COLOURS, strict=True):
+    for css, rgb in zip(harvest, render.AGENT_COLOURS, strict=True):  # the colours draw_episodes draws them in
         assert [int(css[k : k + 2], 16) for k in (1, 3, 5)] == [round(255 * v) for v in rgb]
     assert agent_colours(registry.get("racing").pictures) == []  # one agent: each episode its own colour (the page's)

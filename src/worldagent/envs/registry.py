@@ -138,6 +138,8 @@ class Pictures:
             spawn corners), the explorer's legend beside the picture; empty: none shown.
         agents: names of the agents ``trace`` records, in its order (the legend of their trails);
             empty: "agent 1", "agent 2", ... (one agent: each episode has its own colour).
+        agent_colours: the CSS colour of each agent of ``agents``, the one ``episodes`` draws it in, so
+            the explorer's animation and the report's figures agree; empty: the explorer picks.
         outcomes: ``per-episode metric -> style`` (as ``mark_styles``, shape "cross" too): the mark
             drawn at each agent's last position when the episode's metric is non-zero (racing: a
             red cross where a crash ended it).
@@ -151,6 +153,7 @@ class Pictures:
     mark_styles: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     legend: Mapping[str, str] = field(default_factory=dict)
     agents: tuple[str, ...] = ()
+    agent_colours: tuple[str, ...] = ()
     outcomes: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 

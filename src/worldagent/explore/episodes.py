@@ -190,16 +190,17 @@ def picture_key(pictures, size: int = 384) -> dict:
     }
 
 
-# Agent by agent, the colours the report's figures draw several agents in (harvest's ``render.AGENT_COLOURS``, RGB in
-# [0, 1]: red, blue, orange, magenta), then more that no floor, wall or road has. ``Pictures`` names no colours, so the
-# explorer keeps this copy; tests/explore/test_marks.py holds it to the env's own.
+# For an env whose pictures name no agent colours: colours that no floor, wall or road has.
 AGENT_COLOURS = ("#f24040", "#408cff", "#ffa61a", "#d959f2", "#00d8ff", "#ffd400", "#ffffff", "#8a2be2")
 
 
 def agent_colours(pictures) -> list[str]:
-    """The CSS colours the World view draws the agents of an env with several in (``AGENT_COLOURS``, one per agent
-    ``Pictures.agents`` names); empty for one agent, whose episodes each get their own colour instead."""
-    return list(AGENT_COLOURS[: len(pictures.agents)]) if len(pictures.agents) > 1 else []
+    """The CSS colours the World view draws the agents of an env with several in: the env's own
+    (``Pictures.agent_colours``, those its figures use), else ``AGENT_COLOURS``, one per agent ``Pictures.agents``
+    names; empty for one agent, whose episodes each get their own colour instead."""
+    if len(pictures.agents) < 2:
+        return []
+    return list(pictures.agent_colours or AGENT_COLOURS)[: len(pictures.agents)]
 
 
 def still_picture(spec, world: Any, played, size: int) -> str | None:

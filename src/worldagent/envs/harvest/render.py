@@ -26,6 +26,7 @@ OBSERVER = (40, 90, 230)
 WINDOW = (255, 255, 255)
 REACH = (20, 30, 70)  # dark blue: where the tagger can go
 AGENT_COLOURS = ((0.95, 0.25, 0.25), (0.25, 0.55, 1.0), (1.0, 0.65, 0.1), (0.85, 0.35, 0.95))  # TL, TR, BL, BR (trajectories)
+AGENT_CSS = tuple("#" + "".join(f"{round(255 * v):02x}" for v in rgb) for rgb in AGENT_COLOURS)  # the same, for the explorer
 
 
 def hex_colour(rgb: tuple[int, int, int]) -> str:

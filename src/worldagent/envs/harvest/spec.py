@@ -6,7 +6,7 @@ import numpy as np
 
 from worldagent.envs.harvest.env import BEAM_LENGTH, NUM_AGENTS, VIEW_BEHIND, VIEW_SIZE
 from worldagent.envs.harvest.open_repair import OpenRooms
-from worldagent.envs.harvest.render import LEGEND
+from worldagent.envs.harvest.render import AGENT_CSS, LEGEND
 from worldagent.envs.harvest.repair import HarvestRepair, threshold_maps
 from worldagent.envs.harvest.world import DEFAULT_SIZE, HarvestMap, spawn_corners
 from worldagent.envs.registry import EnvOption, EnvSpec, Metrics, Pictures, ScriptedPolicy, register
@@ -274,6 +274,7 @@ SPEC = register(
             mark_styles=MARK_STYLES,
             legend=LEGEND,
             agents=AGENT_NAMES,
+            agent_colours=AGENT_CSS,
         ),
         scripted={"random": uniform, "greedy": greedy},
         algorithms=("dqn",),

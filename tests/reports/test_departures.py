@@ -51,9 +51,7 @@ def test_each_gap_names_its_likely_cause_and_links_its_section():
     found = {d.row.key: d for d in departures(rows, results)}
     assert set(found) == {"harvest.random.mean_normalised", "harvest.influence.conflict_default", "harvest.influence.equality_default"}
     random = found["harvest.random.mean_normalised"]
-    assert (
-        random.anchor == "random" and "1,000 training episodes (the paper preset's: 5,000)" in random.cause and "best single episode" in random.cause
-    )
+    assert random.anchor == "random" and "1,000 training episodes (paper preset: 5,000)" in random.cause and "best single episode" in random.cause
     conflict = found["harvest.influence.conflict_default"]
     assert conflict.anchor == "influence" and conflict.cause.startswith("one seed per arm")
     assert all(row.note.startswith("one seed") for row in rows[1:])  # the headline table says so too
@@ -84,7 +82,7 @@ def test_a_run_with_the_paper_settings_may_call_a_gap_real():
     results = racing_as_paper()
     assert run_differences("racing", results["racing"]) == []
     cause = likely_cause(CRASHED, results)
-    assert "unexplained" in cause and "real difference" in cause and "the paper preset's:" not in cause
+    assert "unexplained" in cause and "real difference" in cause and "paper preset:" not in cause
     assert "every setting its phases recorded matches the paper's preset" in departures_section([CRASHED], results, "paper")
 
 
@@ -92,15 +90,15 @@ def test_each_setting_unlike_the_papers_is_named_and_the_gap_is_not_called_real(
     """The quick run's case: PPO on the route observation and a 10-epoch VAE, against ACKTR on rays and 25 epochs."""
     results = racing_as_paper(generator={"epochs": 10}, agent={"algo": "ppo", "options": {"observation": "route"}})
     cause = likely_cause(CRASHED, results)
-    assert "10 VAE epochs (the paper preset's: 25)" in cause
-    assert "training algorithm ppo (the paper preset's: acktr)" in cause
-    assert "env option observation route (the paper preset's: rays)" in cause
+    assert "10 VAE epochs (paper preset: 25)" in cause
+    assert "training algorithm ppo (paper preset: acktr)" in cause
+    assert "env option observation route (paper preset: rays)" in cause
     assert "real difference" not in cause
     # a setting the number does not depend on is listed in the box, not given as this number's cause
     results = racing_as_paper(strategic={"budget": 420})
     assert "420 worlds searched" not in likely_cause(CRASHED, results)
     minimum = Headline("racing.min.normalised", "min", 0.37, 0.13)
-    assert likely_cause(minimum, results) == "settings unlike the paper's preset: 420 worlds searched (the paper preset's: 2,100)"  # that field only
+    assert likely_cause(minimum, results) == "settings unlike the paper preset: 420 worlds searched (paper preset: 2,100)"  # that field only
     box = departures_section([CRASHED], results, "quick")
     assert "1 of its settings differs" in box and "data-setting='racing/strategic/budget'" in box
 

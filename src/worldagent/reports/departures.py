@@ -107,10 +107,10 @@ class SettingDifference:
         return fmt(value)
 
     def text(self) -> str:
-        """ "1,000 training episodes (the paper preset's: 5,000)", or "training algorithm ppo (the paper preset's: acktr)"."""
+        """ "1,000 training episodes (paper preset: 5,000)", or "training algorithm ppo (paper preset: acktr)"."""
         ours, theirs = self.shown(self.ours), self.shown(self.paper)
         said = f"{ours} {self.words}" if self.counted and isinstance(self.ours, (int, list)) else f"{self.words} {ours}"
-        return f"{said} (the paper preset's: {theirs})"
+        return f"{said} (paper preset: {theirs})"
 
 
 def differs(ours: float | None, paper: float | None) -> bool:
@@ -230,7 +230,7 @@ def causes(row: Headline, results: dict) -> list[str]:
         if not (d.phase == "influence" and d.name == "seeds" and seeds_of(res) == 1)  # said above
     ]
     if settings:
-        found.append("settings unlike the paper's preset: " + ", ".join(dict.fromkeys(settings)))
+        found.append("settings unlike the paper preset: " + ", ".join(dict.fromkeys(settings)))
     unrecorded = [phase for phase in behind if not res["phases"].get(phase, {}).get("config")]
     if unrecorded or "paper" not in spec.presets:
         what = f"the {', '.join(unrecorded)} phase recorded no settings" if unrecorded else f"{env} has no paper preset"

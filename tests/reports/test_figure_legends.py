@@ -5,20 +5,18 @@ from __future__ import annotations
 
 import itertools
 
-import matplotlib
 import numpy as np
 import pytest
+from matplotlib.text import Text
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.text import Text  # noqa: E402
+from worldagent.envs import registry
+from worldagent.envs.harvest.world import HarvestMap
+from worldagent.evaluation.trajectories import Episodes
+from worldagent.reports.atlas import draw_atlas, draw_counterfactuals
+from worldagent.reports.figures import _pyplot, fit_legend
+from worldagent.search.atlas import Archive, Grid
 
-from worldagent.envs import registry  # noqa: E402
-from worldagent.envs.harvest.world import HarvestMap  # noqa: E402
-from worldagent.evaluation.trajectories import Episodes  # noqa: E402
-from worldagent.reports.atlas import draw_atlas, draw_counterfactuals  # noqa: E402
-from worldagent.reports.figures import fit_legend  # noqa: E402
-from worldagent.search.atlas import Archive, Grid  # noqa: E402
+plt = _pyplot()  # files only (Agg), as the report draws them
 
 SIZE, AGENTS = 19, 4
 

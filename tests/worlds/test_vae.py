@@ -96,3 +96,73 @@ def test_old_checkpoints_load_with_the_training_they_had(tmp_path, racing_vae, r
     assert len(train_vae(data, replace(old, epochs=2), progress=False, checkpoint_dir=tmp_path).history) == 2
     with pytest.raises(WorldagentError, match=r"free_bits 0\.0, not 0\.5"):
         train_vae(data, replace(old, epochs=3, free_bits=0.5), progress=False, checkpoint_dir=tmp_path)
+
+
+def _history(losses: list[float]) -> list[dict]:
+    return [{"epoch": i + 1, "holdout_loss": loss} for i, loss in enumerate(losses)]
+
+
+def test_the_kept_epoch_is_the_lowest_held_out_loss_after_warm_up():
+    from worldagent.worlds.vae import kept_epoch
+
+    assert kept_epoch(_history([90.0, 50.0, 70.0, 60.0, 60.0, 65.0]), warmup_epochs=2) == 4  # epoch 2 is in warm-up; ties: the earliest
+    assert kept_epoch(_history([90.0, 80.0, float("nan"), 85.0]), warmup_epochs=1) == 2  # a NaN held-out loss is never kept
+    assert kept_epoch(_history([90.0, 50.0]), warmup_epochs=5) == 2  # all within warm-up: the last
+    assert kept_epoch(_history([float("nan")] * 3), warmup_epochs=0) == 3  # no held-out split: the last
+    assert kept_epoch([], warmup_epochs=0) == 0
+    # the objective training minimises (free bits included) decides, where the history has it
+    rows = [{**row, "holdout_objective": objective} for row, objective in zip(_history([55.0, 54.7, 55.3]), [60.0, 58.0, 56.0])]
+    assert kept_epoch(rows, warmup_epochs=0) == 3
+
+
+def test_training_stops_patience_epochs_after_the_best():
+    from worldagent.worlds.vae import VAEConfig, stopped_early
+
+    config = VAEConfig(warmup_epochs=1, patience=2)
+    assert not stopped_early(_history([90.0, 80.0, 85.0]), config)  # one epoch since the best
+    assert stopped_early(_history([90.0, 80.0, 85.0, 81.0]), config)
+    assert not stopped_early(_history([90.0, 80.0, 85.0, 81.0]), replace(config, patience=0))  # 0: every epoch
+    assert not stopped_early(_history([50.0, 80.0, 85.0]), replace(config, warmup_epochs=3))  # within warm-up: never
+
+
+def _unlike_held_out_worlds(holdout: float, seed: int):
+    """64 worlds whose held-out ones (``split_holdout``) fill the 24 cells every training world leaves empty: the
+    longer a VAE trains, the surer it is that those cells are empty, and the worse its held-out loss."""
+    from worldagent.worlds.dataset import WorldDataset
+
+    cells = np.zeros((64, 48), np.uint8)
+    cells[:, :24] = np.random.default_rng(0).random((64, 24)) < 0.3
+    cells[split_holdout(64, holdout, seed)[1], 24:] = 1
+    return WorldDataset("racing", np.arange(64), None, cells, (48,))
+
+
+def _same(a, b) -> bool:
+    return jax.tree_util.tree_all(jax.tree_util.tree_map(lambda x, y: np.allclose(x, y, atol=1e-6), a, b))
+
+
+DIVERGING = {"holdout": 0.25, "warmup_epochs": 1, "patience": 0}
+
+
+def test_training_keeps_the_best_held_out_epochs_weights(tmp_path, small_vae):
+    """7 epochs return (and save) the same weights as 6: the kept epoch's, not the last's."""
+    config = replace(small_vae, epochs=7, **DIVERGING)
+    data = _unlike_held_out_worlds(config.holdout, config.seed)
+    straight = train_vae(data, config, progress=False)
+    first = train_vae(data, replace(config, epochs=6), progress=False, checkpoint_dir=tmp_path)
+    kept = first.kept_epoch
+    assert 1 < kept < 6 and straight.kept_epoch == kept and first.kept == first.history[kept - 1]
+    assert _same(straight.params, first.params) and _same(TrainedVAE.load(tmp_path).params, first.params)
+
+
+@pytest.mark.slow
+def test_a_resumed_run_goes_on_from_the_last_epoch_not_the_kept_one(tmp_path, small_vae):
+    config = replace(small_vae, epochs=7, **DIVERGING)
+    data = _unlike_held_out_worlds(config.holdout, config.seed)
+    first = train_vae(data, replace(config, epochs=6), progress=False, checkpoint_dir=tmp_path)
+    kept = first.kept_epoch
+    assert kept < 6
+    resumed = train_vae(data, config, progress=False, checkpoint_dir=tmp_path)
+    straight = train_vae(data, config, progress=False)
+    assert resumed.history[-1]["train_loss"] == pytest.approx(straight.history[-1]["train_loss"], rel=1e-4)
+    stopped = train_vae(data, replace(config, epochs=50, patience=7 - kept), progress=False, checkpoint_dir=tmp_path)
+    assert len(stopped.history) == 7 and TrainedVAE.load(tmp_path).kept_epoch == kept  # patience spent: no further epoch

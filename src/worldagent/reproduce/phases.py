@@ -138,13 +138,18 @@ def vae_config(preset: Preset, env: str):
 
 
 def generator_phase(ctx: EnvContext) -> dict:
-    """Train the VAE (resuming its checkpoint), save G(z), measure it and draw its traversals."""
+    """Train the VAE (resuming its checkpoint), save G(z), measure it and draw its traversals.
+
+    A generator its quality gate rejects (``worlds.quality.gate``) is refused in one line, its
+    figures written first, unless the preset accepts it for a reason (``Preset.accept_generator``);
+    the verdict is recorded as ``gate`` in quality.json and in the phase's outputs.
+    """
     import jax
 
     from worldagent.worlds.dataset import WorldDataset
     from worldagent.worlds.generator import build_generator, save_generator
     from worldagent.worlds.pictures import traversal_sheet
-    from worldagent.worlds.quality import diagnose, figures, reconstruction
+    from worldagent.worlds.quality import diagnose, figures, gate, gate_kinds, reconstruction
     from worldagent.worlds.vae import split_holdout, train_vae
 
     layout = ctx.layout
@@ -156,26 +161,36 @@ def generator_phase(ctx: EnvContext) -> dict:
     train, held = split_holdout(len(data), config.holdout, config.seed)
     recon = reconstruction(generator, data, held, train)
     measured = figures(generator, data, QUALITY_SAMPLES, jax.random.key(ctx.seed))
-    warnings = diagnose(recon, measured, len(data), vae.history[-1]["nll"])  # collapsed, inert or narrow: the report shows them
+    warnings = diagnose(recon, measured, len(data), vae.kept["nll"])  # collapsed, inert or narrow: the report shows them
+    verdict = gate(warnings, ctx.preset.accept_generator)
+    kept_epoch = vae.kept_epoch or len(vae.history)
     quality = {
         "env": ctx.env,
         "worlds": len(data),
         "reconstruction": recon,
         ctx.env: measured,
-        "training": {"epochs": len(vae.history), "final": vae.history[-1], "history": vae.history},
+        "training": {"epochs": len(vae.history), "kept_epoch": kept_epoch, "kept": vae.kept, "final": vae.history[-1], "history": vae.history},
         "warnings": warnings,
+        "gate": verdict,
     }
     quality_path = write_text(layout.quality_path, json.dumps(quality, indent=1))
+    if verdict["verdict"] == "rejected":
+        raise WorldagentError(
+            f"{ctx.env}'s generator fails its quality gate ({gate_kinds(warnings)}; {layout.rel(quality_path)} says why): rerun with "
+            "--accept-generator to use it anyway (recorded in the manifest and the report), or with another --repair or a larger --preset."
+        )
     traversals = traversal_sheet(generator, layout.figure("generator_traversals"))
     accuracy = recon["vae"]["accuracy"]
-    flagged = f"; {len(warnings)} warning(s): {warnings[0].split(':')[0]}" if warnings else ""
+    flagged = f"; gate {verdict['verdict']} ({gate_kinds(warnings)}: {verdict['waiver']})" if warnings else "; gate passed"
     return {
         "generator": layout.rel(layout.generator_dir),
         "quality": layout.rel(quality_path),
         "traversals": layout.rel(traversals),
-        "final_loss": vae.history[-1]["holdout_loss"],
+        "final_loss": vae.kept["holdout_loss"],
         "warnings": warnings,
-        "summary": f"{len(vae.history)} epochs, held-out loss {vae.history[-1]['holdout_loss']:.1f}, cell accuracy {accuracy:.3f}{flagged}",
+        "gate": verdict,
+        "summary": f"{len(vae.history)} epochs (kept {kept_epoch}), held-out loss {vae.kept['holdout_loss']:.1f}, "
+        f"cell accuracy {accuracy:.3f}{flagged}",
     }
 
 

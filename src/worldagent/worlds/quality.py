@@ -17,6 +17,8 @@
 - ``diagnose``: one-line warnings, each naming its fix, when a generator is collapsed (z carries
   nothing), inert (moving z changes no world) or narrow (a descriptor spreads far less than in the
   dataset) — such a generator gives search nothing to find, whatever its loss says.
+- ``gate``: the verdict on those warnings: passed (none), rejected (any), or waived (rejected, but
+  used for a recorded reason).
 
 Worlds are compared by their cells (``EnvSpec.cells``), so nothing here depends on the
 environment: racing's nearest-track repair and harvest's apple-count repair get the same figures.
@@ -410,3 +412,30 @@ def diagnose(reconstruction: dict, figures: dict, worlds: int, training_nll: flo
     """
     structure = figures["structure"]
     return _collapse(reconstruction, figures["latent"], training_nll) + _inert(figures, worlds) + _narrow(structure) + _shifted(structure)
+
+
+def gate(warnings: list[str], waiver: str | None = None) -> dict:
+    """The quality gate's verdict on a generator, from ``diagnose``'s warnings.
+
+    Every warning is a rejection (each flags a generator search cannot use). A rejected generator
+    is used only under a ``waiver``, a reason recorded with the verdict: a tiny preset's toy
+    budgets, or a user's explicit acceptance.
+
+    Args:
+        warnings: ``diagnose``'s one-line warnings.
+        waiver: why a generator the gate rejects may be used anyway; None: it may not.
+
+    Returns:
+        ``{"verdict": "passed" | "waived" | "rejected", "warnings": [...]}``, with ``"waiver": reason``
+        when waived.
+    """
+    if not warnings:
+        return {"verdict": "passed", "warnings": []}
+    if waiver:
+        return {"verdict": "waived", "warnings": list(warnings), "waiver": waiver}
+    return {"verdict": "rejected", "warnings": list(warnings)}
+
+
+def gate_kinds(warnings: list[str]) -> str:
+    """The kinds of ``warnings`` (their text before the first colon: collapsed, overfit, ...), each once, comma-separated."""
+    return ", ".join(dict.fromkeys(line.split(":")[0] for line in warnings))

@@ -155,6 +155,17 @@ def test_a_poor_held_out_fit_is_overfit_when_the_training_worlds_decode_well():
     assert diagnose(recon, measured, 10_000, training_nll=55.0)[0].startswith("underfit:")
 
 
+def test_an_unused_z_before_the_training_worlds_beat_the_mean_world_is_underfit_not_collapsed():
+    """ued_maze's tiny preset (3 epochs): 0 of 10 dimensions active, but not even the training mazes decode better than the
+    mean maze; more free bits would not help, more epochs would."""
+    recon, measured = healthy()
+    recon["vae"]["nll_per_world"] = 663.5
+    measured["latent"].update(active_units=0, kl_total=0.08)
+    assert diagnose(recon, measured, 10_000)[0].startswith("collapsed: 0 of 5")  # without the training NLL: the old reading
+    warnings = diagnose(recon, measured, 10_000, training_nll=591.7)
+    assert len(warnings) == 1 and warnings[0].startswith("underfit: even the training worlds") and "--epochs" in warnings[0]
+
+
 def test_distinct_decodes_are_judged_against_what_the_dataset_allows():
     recon, measured = healthy()
     measured["coverage_distinct_worlds"] = 30  # 30 of 1,000 draws, but the dataset holds only 100 worlds

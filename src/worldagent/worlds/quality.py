@@ -333,10 +333,17 @@ RETRAIN = "retrain with a larger --free-bits (e.g. 1.0), a smaller --beta or mor
 def _collapse(reconstruction: dict, latent: dict, training_nll: float | None) -> list[str]:
     units, kl = latent["active_units"], latent["kl_total"]
     dims = len(latent["kl_per_dim"])
+    vae, mean = reconstruction["vae"]["nll_per_world"], reconstruction["mean_image"]["nll_per_world"]
+    if training_nll is not None and training_nll > (1 - MIN_NLL_GAIN) * mean:
+        # nothing learnt yet, not even the mean world: an unused z says nothing of collapse (ued_maze's tiny preset,
+        # 3 epochs: 0 of 10 dimensions active at a training NLL of 592 against the mean maze's 58), and free bits cannot help
+        return [
+            f"underfit: even the training worlds decode no better than the mean world (training NLL {training_nll:.1f}, held-out {vae:.1f}, "
+            f"mean world {mean:.1f} nats per world; {units} of {dims} latent dimensions active) — train longer (more --epochs)."
+        ]
     out = []
     if units < MIN_ACTIVE_UNITS or kl < MIN_KL_NATS:
         out.append(f"collapsed: {units} of {dims} latent dimensions active, KL {kl:.3g} nats in all; G(z) barely depends on z — {RETRAIN}.")
-    vae, mean = reconstruction["vae"]["nll_per_world"], reconstruction["mean_image"]["nll_per_world"]
     if vae <= (1 - MIN_NLL_GAIN) * mean:
         return out
     said = f"held-out reconstruction no better than the mean world (NLL {vae:.1f} vs {mean:.1f} nats per world)"
@@ -398,7 +405,9 @@ def diagnose(reconstruction: dict, figures: dict, worlds: int, training_nll: flo
     Collapsed: fewer than ``MIN_ACTIVE_UNITS`` active dimensions or under ``MIN_KL_NATS`` of KL
     (and then also a held-out reconstruction within ``MIN_NLL_GAIN`` of the mean world's). Overfit:
     that poor a held-out reconstruction while z is in use and the training worlds decode well
-    (training NLL under ``OVERFIT_RATIO`` of the held-out); underfit: neither decodes well yet. Inert: a ±1 move
+    (training NLL under ``OVERFIT_RATIO`` of the held-out); underfit: neither decodes well yet, or
+    the training worlds decode no better than the mean world (then no collapse is claimed: nothing
+    is learnt yet, and training longer is the fix, not free bits). Inert: a ±1 move
     along z changes under ``MIN_CHANGED_WORLD_SHARE`` of worlds, or the draws hold under
     ``MIN_DISTINCT_SHARE`` distinct worlds. Narrow: a descriptor whose std under G(z) is below
     ``MIN_SPREAD_RATIO`` of the dataset's. Shifted: a descriptor whose distribution under G(z) is more than

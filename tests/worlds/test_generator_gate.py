@@ -14,6 +14,7 @@ import pytest
 
 from toy_env import registered
 from worldagent.errors import WorldagentError
+from worldagent.reproduce import phases
 from worldagent.reproduce.phases import EnvContext, dataset_phase, generator_phase
 from worldagent.reproduce.presets import get_preset
 from worldagent.worlds import quality
@@ -51,6 +52,7 @@ def toy_run(tmp_path_factory):
 def test_the_generator_phase_refuses_a_rejected_generator_and_records_a_waived_one(toy_run, monkeypatch):
     out, env, tiny = toy_run
     monkeypatch.setattr(quality, "diagnose", lambda *args, **kwargs: [OVERFIT])  # the gate's finding, whatever this VAE is
+    monkeypatch.setattr(phases, "QUALITY_SAMPLES", 50)  # figures of 50 draws: the verdict is what is tested
     with registered():
         with pytest.raises(WorldagentError, match=r"toy's generator fails its quality gate \(overfit; .*--accept-generator") as refused:
             generator_phase(EnvContext(out, env, replace(tiny, accept_generator=None), progress=False))

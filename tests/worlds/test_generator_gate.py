@@ -64,3 +64,18 @@ def test_the_generator_phase_refuses_a_rejected_generator_and_records_a_waived_o
     assert "gate waived (overfit: expected at the tiny preset" in outputs["summary"]
     written = json.loads((out / env / "generator" / "quality.json").read_text())
     assert written["gate"] == outputs["gate"] and written["training"]["kept_epoch"] == 3  # 3 epochs, all within warm-up: the last
+
+
+def test_accept_generator_on_the_command_line_is_the_recorded_reason():
+    import json
+
+    from typer.testing import CliRunner
+
+    from worldagent.cli import app
+
+    shown = {}
+    for flags in ([], ["--accept-generator"]):
+        result = CliRunner().invoke(app, ["reproduce", "--preset", "quick", "--env", "racing", "--show", *flags])
+        assert result.exit_code == 0, result.output
+        shown[bool(flags)] = json.loads(result.output)["accept_generator"]
+    assert shown == {False: None, True: "--accept-generator"}

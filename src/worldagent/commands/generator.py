@@ -94,8 +94,8 @@ def quality_figures(directory: Path, samples: int, seed: int) -> dict:
         "worlds": len(data),
         "reconstruction": recon,
         data.env: measured,
-        "training": {"epochs": len(vae.history), "final": vae.history[-1]},
-        "warnings": diagnose(recon, measured, len(data), vae.history[-1]["nll"]),
+        "training": {"epochs": len(vae.history), "kept_epoch": vae.kept_epoch or len(vae.history), "kept": vae.kept, "final": vae.history[-1]},
+        "warnings": diagnose(recon, measured, len(data), vae.kept["nll"]),
     }
 
 
@@ -181,13 +181,16 @@ def register(app: typer.Typer) -> None:
         check_writable(out, folder=True)
         epochs_before = trained_epochs(out)
         vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet, repair_name=repair_name)
-        last = vae.history[-1]
+        last = vae.kept
         repair_note = (repair_name or registry.get(env).default_repair) + "".join(
             f", {name}={value}" + ("" if name in settings else " (default)") for name, value in used.items()
         )
         if epochs_before >= len(vae.history):  # a finished VAE is reused as it is (a new repair costs no training)
             console.print(f"reused the VAE already trained in {out} ({epochs_before} epochs); only the repair was rebuilt (another --out retrains)")
-        console.print(f"trained {env} generator in {out}: loss {last['train_loss']:.1f}, held-out {last['holdout_loss']:.1f}; repair: {repair_note}")
+        console.print(
+            f"trained {env} generator in {out}: kept epoch {last['epoch']} of {len(vae.history)}, loss {last['train_loss']:.1f}, "
+            f"held-out {last['holdout_loss']:.1f}; repair: {repair_note}"
+        )
         quality = quality_figures(out, TRAIN_SAMPLES, 0)  # a quick look (~1,000 decodes); `generator report` measures more
         console.print(key_figures(quality), highlight=False)
         print_warnings(quality["warnings"])

@@ -83,6 +83,12 @@ def register(app: typer.Typer) -> None:
             help="Every env's G(z) repair by name, e.g. open (new valid worlds beyond the dataset); default: the paper's (nearest). "
             "`worldagent envs` lists them.",
         ),
+        accept_generator: bool = typer.Option(
+            False,
+            "--accept-generator",
+            help="Use a generator its quality gate rejects (docs/generator.md) instead of stopping; the verdict and its warnings "
+            "are recorded in the manifest and the report.",
+        ),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
     ) -> None:
@@ -93,7 +99,7 @@ def register(app: typer.Typer) -> None:
         from worldagent.reproduce.pipeline import reproduce as run
         from worldagent.reproduce.presets import get_preset
 
-        chosen = get_preset(preset).with_algo(algo).with_repair(repair)
+        chosen = get_preset(preset).with_algo(algo).with_repair(repair).with_generator_accepted("--accept-generator" if accept_generator else None)
         envs = resolve_envs(env, chosen)
         chosen = chosen.with_settings(parse_settings(settings, [chosen.algo_of(name) for name in envs]))
         chosen = chosen.with_curriculum(curriculum, target, maximize, parse_curriculum_settings(curriculum_settings))

@@ -71,6 +71,14 @@ def per_env(results: dict, phase: str, render, needs: str | None = None, absent:
     return "".join(parts) or missing("not run")
 
 
+def kept_loss_row(training: dict) -> list[str]:
+    """The held-out loss of the weights G(z) uses: the kept epoch's (training keeps its best held-out epoch), else the last."""
+    kept = training.get("kept")
+    if kept is None:  # trained before the best epoch was kept
+        return ["final held-out loss", fmt(training["final"]["holdout_loss"])]
+    return [f"held-out loss of the kept epoch ({training['kept_epoch']} of {training['epochs']})", fmt(kept["holdout_loss"])]
+
+
 def generator_section(run_dir: Path, results: dict) -> str:
     def render(env: str, res: dict) -> str:
         quality = res["quality"]
@@ -80,7 +88,7 @@ def generator_section(run_dir: Path, results: dict) -> str:
             ["reconstruction: on-cell IoU (VAE / mean image)", f"{fmt(recon['vae']['iou'])} / {fmt(recon['mean_image']['iou'])}"],
             ["held-out worlds", fmt(recon["worlds"])],
             ["training epochs", fmt(quality["training"]["epochs"])],
-            ["final held-out loss", fmt(quality["training"]["final"]["holdout_loss"])],
+            kept_loss_row(quality["training"]),
         ]
         figures = quality.get(env, {})
         rows += [[name.replace("_", " "), fmt(value)] for name, value in figures.items() if not isinstance(value, dict)]

@@ -84,3 +84,24 @@ def test_the_figure_is_a_png(tmp_path):
     assert out.stat().st_size > 10_000
     with Image.open(out) as image:
         assert image.format == "PNG" and image.size[0] > image.size[1] > 300
+
+
+def test_the_best_so_far_panel_draws_each_optimisers_confirmed_world_where_the_random_tail_puts_it():
+    from worldagent.reports.comparison import _best_so_far_panel
+    from worldagent.reports.figures import _pyplot
+
+    plt = _pyplot()
+    figure, axis = plt.subplots()
+    rows = [  # confirmed means with their intervals, on RANDOM = 0..99: shares (v + 1) / 100 of random worlds at or below
+        {"optimiser": "b", "confirmed_mean": 49.0, "confirmed_mean_low": 29.0, "confirmed_mean_high": 69.0},
+        {"optimiser": "a", "confirmed_mean": 9.0, "confirmed_mean_low": 4.0, "confirmed_mean_high": 19.0},
+    ]
+    _best_so_far_panel(axis, RUNS, RANDOM, "return", False, plt.get_cmap("tab10"), rows)
+    bars = [c for c in axis.containers if c.has_yerr]
+    assert len(bars) == 2
+    for bar, (mean, low, high) in zip(bars, [(0.5, 0.3, 0.7), (0.1, 0.05, 0.2)]):
+        (y,) = bar.lines[0].get_ydata()
+        segment = bar.lines[2][0].get_segments()[0]
+        assert y == pytest.approx(mean) and sorted(segment[:, 1]) == pytest.approx([low, high])
+    assert bars[0].lines[0].get_color() == plt.get_cmap("tab10")(1)  # b's colour: its curve's, not its row's place
+    plt.close(figure)

@@ -485,12 +485,16 @@ def _distribution_panel(axis, pooled: dict[str, np.ndarray], random_scores: np.n
         )
 
 
-def _best_so_far_panel(axis, runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, maximize: bool, colours) -> None:
+def _best_so_far_panel(
+    axis, runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, maximize: bool, colours, confirmed: list[dict] | None = None
+) -> None:
     """Best world so far vs evaluations, as its place in the random tail (log scale).
 
     A tail share is the best-so-far score on the scale of the random distribution, which makes
     one axis for outliers and the bulk; the right axis gives the score at each tick. The dotted
-    curve is random search's expectation, 1/(n+1) after n worlds.
+    curve is random search's expectation, 1/(n+1) after n worlds. ``confirmed`` (``confirmed_efficiency``'s
+    rows): each optimiser's reported worlds replayed on fresh episodes, drawn past the curves' end as the
+    mean over seeds with its 95% interval, where the found curve ends being partly luck.
     """
     count = len(random_scores)
     floor = 0.5 / count  # "beyond every random world"
@@ -502,6 +506,20 @@ def _best_so_far_panel(axis, runs: dict[str, list[np.ndarray]], random_scores: n
         x = np.arange(1, length + 1)
         axis.step(x, np.median(curves, axis=0), where="post", color=colours(i), linewidth=2, label=f"{name} (median of {len(seeds)} seeds)")
         axis.fill_between(x, curves.min(axis=0), curves.max(axis=0), step="post", color=colours(i), alpha=0.15, linewidth=0)
+    for i, row in enumerate(confirmed or ()):
+        index = list(runs).index(row["optimiser"])
+        share = lambda v: max(float(tail_fraction(np.array([v]), random_scores, maximize)[0]), floor)  # noqa: E731
+        mean, low, high = share(row["confirmed_mean"]), share(row["confirmed_mean_low"]), share(row["confirmed_mean_high"])
+        low, high = min(low, high), max(low, high)  # a maximising search's shares fall as values rise
+        axis.errorbar(
+            [longest * (1.04 + 0.03 * i)],
+            [mean],
+            yerr=[[mean - low], [high - mean]],
+            fmt="D",
+            color=colours(index),
+            capsize=3,
+            label="confirmed on fresh episodes (mean over seeds, 95%)" if i == 0 else None,
+        )
     x = np.arange(1, longest + 1)
     axis.plot(x, 1 / (x + 1), color="0.3", linestyle=":", linewidth=1.2, label="random search, expected 1/(n+1)")
     axis.axhline(floor, color="0.5", linewidth=0.8)
@@ -525,7 +543,13 @@ def _best_so_far_panel(axis, runs: dict[str, list[np.ndarray]], random_scores: n
 
 
 def comparison_figure(
-    runs: dict[str, list[np.ndarray]], random_scores: np.ndarray, metric: str, out: Path | str, maximize: bool = False, bins: int = 40
+    runs: dict[str, list[np.ndarray]],
+    random_scores: np.ndarray,
+    metric: str,
+    out: Path | str,
+    maximize: bool = False,
+    bins: int = 40,
+    confirmed: list[dict] | None = None,
 ) -> Path:
     """Figure 7 and a best-so-far curve, side by side, to PNG.
 
@@ -533,7 +557,8 @@ def comparison_figure(
     pooled) against the random distribution, each as a share of its worlds (far outliers are
     counted in a note rather than squashing the bulk). Right: the best world found so far
     against the number of evaluated worlds, median over seeds with the min–max band, placed in
-    the random distribution's tail (see ``_best_so_far_panel``).
+    the random distribution's tail, with each optimiser's reported worlds as confirmed on fresh
+    episodes when ``confirmed`` (``confirmed_efficiency``'s rows) is given (see ``_best_so_far_panel``).
     """
     from worldagent.reports.figures import _pyplot
 
@@ -545,7 +570,7 @@ def comparison_figure(
     pooled = {name: _finite(np.concatenate([np.asarray(s, np.float64) for s in seeds]), f"{name}'s scores") for name, seeds in runs.items()}
     figure, (left, right) = plt.subplots(1, 2, figsize=(13, 4.8), dpi=120)
     _distribution_panel(left, pooled, random_scores, metric, maximize, colours, bins)
-    _best_so_far_panel(right, runs, random_scores, metric, maximize, colours)
+    _best_so_far_panel(right, runs, random_scores, metric, maximize, colours, confirmed)
     figure.tight_layout()
     path = write_atomically(out, lambda tmp: figure.savefig(tmp, format="png"))
     plt.close(figure)

@@ -283,7 +283,7 @@ def confirmed_comparison(env: str, res: dict) -> str:
 
 
 def comparison_section(run_dir: Path, results: dict) -> str:
-    from worldagent.reports.comparison import comparison_figure, sample_efficiency
+    from worldagent.reports.comparison import comparison_figure, confirmed_efficiency, sample_efficiency
 
     def render(env: str, res: dict) -> str:
         outputs = res["phases"]["compare"].get("outputs", {})
@@ -310,7 +310,9 @@ def comparison_section(run_dir: Path, results: dict) -> str:
             f"best {res['metric']} (mean over seeds)",
             f"mean {res['metric']} sampled",
         ]
-        figure = comparison_figure(runs, random, res["metric"], res["layout"].figure("comparison"), maximize=False)
+        confirmed = res["compare"].get("confirmed")
+        rows = confirmed_efficiency(runs, confirmed, res["metric"]) if confirmed else None
+        figure = comparison_figure(runs, random, res["metric"], res["layout"].figure("comparison"), maximize=False, confirmed=rows)
         return (
             table(head, body, raw_cells=True)
             + "<p>Worlds each optimiser evaluated (median over seeds) before its first world scoring at or below the random "

@@ -384,9 +384,9 @@ def compare_phase(ctx: EnvContext) -> dict:
         runs = experiments.compare_optimisers(store, setup, ctx.metric, resume=True, **arguments)
         # Figure 7 ranks by each seed's best world, partly luck: rank again on those worlds replayed on fresh episodes
         confirmed = experiments.confirm_optimisers(store, setup, ctx.metric, repeats=ctx.preset.confirm, seed=ctx.seed, **arguments)
-    figure = comparison_figure(runs, random_scores(ctx), ctx.metric, ctx.layout.figure("comparison"), maximize=False)
-    best = {opt: float(np.nanmin(np.concatenate([np.ravel(r) for r in scores]))) for opt, scores in runs.items()}
     rows = confirmed_efficiency(runs, confirmed, ctx.metric)
+    figure = comparison_figure(runs, random_scores(ctx), ctx.metric, ctx.layout.figure("comparison"), maximize=False, confirmed=rows)
+    best = {opt: float(np.nanmin(np.concatenate([np.ravel(r) for r in scores]))) for opt, scores in runs.items()}
     verdict = ordering(rows, confirmed, ctx.metric)
     means = ", ".join(f"{row['optimiser']} {row['confirmed_mean']:.4g}" for row in sorted(rows, key=lambda row: row["rank"]))
     found, selection = ", ".join(f"{opt} {value:.4g}" for opt, value in best.items()), experiments.comparison_selection_name(False, ctx.metric)

@@ -29,7 +29,7 @@ seed) ``--repeats`` times, and we report per agent:
 - the training wall time of each arm (its seeds together, from the runs' curves: resumes add up);
 - ``held_out_mean``, ``held_out_p_failure``, ``held_out_failing_worlds`` (with ``--held-out``): the
   same on a given set of worlds none of the arms trained on by construction, e.g. the failing
-  worlds of ``transfer_failures.py`` that most ``dr`` agents fail.
+  worlds of ``studies/transfer_failures.py`` that most ``dr`` agents fail.
 
 Across seeds: means with 95% Student-t intervals, and whether each arm's interval overlaps
 ``dr``'s. Beside them, ``pooled_vs_dr``: each arm against ``dr`` over all seeds' agents and all
@@ -339,7 +339,7 @@ def main(argv=None) -> dict:
         "--held-out",
         type=Path,
         default=None,
-        help="an .npz of latents (transfer_failures.py's transferable worlds): every agent is scored on them too",
+        help="an .npz of latents (studies/transfer_failures.py's transferable worlds): every agent is scored on them too",
     )
     parser.add_argument("--repeats", type=int, default=8)
     parser.add_argument("--work", type=Path, default=None)

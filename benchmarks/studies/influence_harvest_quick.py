@@ -1,8 +1,8 @@
 """Harvest influencing at the quick preset's scale: does one quick run show the paper's direction?
 
     worldagent reproduce --preset quick --env harvest --out runs/quick      # once: dataset, generator, given agent
-    python benchmarks/influence_harvest_quick.py --run runs/quick --episodes 1500 --seeds 0 1 2
-    python benchmarks/influence_harvest_quick.py --run runs/quick --episodes 1500 --seeds 0 1 2 --dqn epsilon_decay_episodes=1000
+    python benchmarks/studies/influence_harvest_quick.py --run runs/quick --episodes 1500 --seeds 0 1 2
+    python benchmarks/studies/influence_harvest_quick.py --run runs/quick --episodes 1500 --seeds 0 1 2 --dqn epsilon_decay_episodes=1000
 
 Re-runs only the harvest influence phase of a ``reproduce --preset quick`` run directory, with
 the training episodes, evaluation worlds, seeds and DQN settings given (everything else as the
@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
 from influence_harvest import SPEC, selected_structure, who_collects_what  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
 from worldagent import experiments  # noqa: E402
@@ -112,7 +112,7 @@ def main(argv=None) -> dict:
     record["settings"][name] = {
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "machine": describe_machine(),
-        "command": "python benchmarks/influence_harvest_quick.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": "python benchmarks/studies/influence_harvest_quick.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "budgets": {
             "influence_episodes": episodes,
             "influence_eval_worlds": eval_worlds,

@@ -1,7 +1,7 @@
 """How much does the tagger fight? Conflict of harvest's default agents against scarcity, window, beam and training length.
 
-    python benchmarks/harvest_conflict_sweep.py                       # every setting below, seed 0, 2,000 episodes
-    python benchmarks/harvest_conflict_sweep.py --only perolat_window --episodes 5000 --seeds 0 1
+    python benchmarks/studies/harvest_conflict_sweep.py                       # every setting below, seed 0, 2,000 episodes
+    python benchmarks/studies/harvest_conflict_sweep.py --only perolat_window --episodes 5000 --seeds 0 1
 
 Each setting trains four independent DQNs (agent 0 may TAG, paper §6.2.2) with harvest's
 default config (``algorithms.training_config``) on the paper's dataset of 10,000 procedural
@@ -24,7 +24,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
 from machine import RESULTS, describe_machine  # noqa: E402
 from train_harvest import EVAL_SEED, evaluate, summary  # noqa: E402
 from worldagent.agents.algorithms import training_config  # noqa: E402

@@ -1,7 +1,7 @@
 """What the curricula's buffers favoured at the end of training: the env's world descriptors of each
 arm's top-scored buffer latents against random G(z) worlds.
 
-    python benchmarks/curriculum_buffers.py --env harvest --work runs/curriculum-harvest --arms plr accel target
+    python benchmarks/studies/curriculum_buffers.py --env harvest --work runs/curriculum-harvest --arms plr accel target
     # -> benchmarks/results/curriculum-buffers-harvest.json
 
 For every seed's run directory ``--work/<arm>/s<seed>`` it reads the last buffer snapshot
@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
 from machine import RESULTS, describe_machine  # noqa: E402
 from worldagent.curricula.snapshots import load_snapshots  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
@@ -85,7 +85,7 @@ def main(argv=None) -> dict:
         "benchmark": "curriculum-buffers",
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "machine": describe_machine(),
-        "command": "python benchmarks/curriculum_buffers.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": "python benchmarks/studies/curriculum_buffers.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "env": args.env,
         "generator": str(gen_dir),
         "top": args.top,

@@ -1,6 +1,6 @@
 """Failures that belong to the world: do other agents fail where one agent's atlas found failures? (issue 39, item 4)
 
-    python benchmarks/transfer_failures.py --generator runs/open/racing/generator \\
+    python benchmarks/studies/transfer_failures.py --generator runs/open/racing/generator \\
         --agents runs/curriculum-racing-open/dr/s{0,1,2,3,4}
 
 For each repair of the generator's VAE (``EnvSpec.repairs``: the paper's ``nearest``, ``open``) and
@@ -28,7 +28,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
 from machine import RESULTS, describe_machine  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
@@ -155,7 +155,7 @@ def main() -> None:
         np.savez(out, latents=latents, **fields)
         result["repairs"][name] = {**summary, "transferable_worlds_file": str(out)}
     result["machine"] = describe_machine()
-    result["command"] = "python benchmarks/transfer_failures.py " + " ".join(sys.argv[1:])
+    result["command"] = "python benchmarks/studies/transfer_failures.py " + " ".join(sys.argv[1:])
     path = RESULTS / "transfer-failures.json"
     runs = json.loads(path.read_text()).get("runs", {}) if path.is_file() else {}
     runs[args.failure] = result  # one entry per failure event: a lower threshold says how near the default came

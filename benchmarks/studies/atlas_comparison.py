@@ -1,6 +1,6 @@
 """The failure atlas against CMA-ES and random search at the same budget (issue 15, item 1).
 
-    python benchmarks/atlas_comparison.py --run runs/quick [--budget 2100] [--seeds 0 1 2]
+    python benchmarks/studies/atlas_comparison.py --run runs/quick [--budget 2100] [--seeds 0 1 2]
 
 For each seed, three campaigns minimise the racing return of the run's agent on its generator,
 ``--budget`` worlds × 8 episodes each, in one store: the atlas (CMA-ME over a 10×10 grid of
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
 from machine import RESULTS, describe_machine  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
@@ -96,7 +96,7 @@ def main() -> None:
         "benchmark": "atlas-comparison",
         "when": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "machine": describe_machine(),
-        "command": "python benchmarks/atlas_comparison.py " + " ".join(sys.argv[1:]),
+        "command": "python benchmarks/studies/atlas_comparison.py " + " ".join(sys.argv[1:]),
         "agent": str(args.run / "racing" / "agent"),
         "generator": str(args.run / "racing" / "generator"),
         "budget": args.budget,

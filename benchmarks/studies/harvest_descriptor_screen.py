@@ -1,6 +1,6 @@
 """Which harvest descriptors let the surrogate proposal find low sustainability (issue 15, item 2).
 
-    python benchmarks/harvest_descriptor_screen.py [--worlds 100000] [--pilots 8]
+    python benchmarks/studies/harvest_descriptor_screen.py [--worlds 100000] [--pilots 8]
 
 On ``failure_rate.py``'s harvest generator, agent and brute force (its cache, ``--cache``), with
 each map's one brute-force episode frozen:
@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.ndimage import label
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
 import failure_rate as bench  # noqa: E402
 from machine import RESULTS, describe_machine  # noqa: E402
 from worldagent import experiments  # noqa: E402

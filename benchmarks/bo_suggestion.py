@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import QUICK_RUN, RESULTS, describe_machine, require_input  # noqa: E402
 from worldagent.search.optimisers import make_optimiser  # noqa: E402
 
 OUT = RESULTS / "bo-suggestion.json"
@@ -152,7 +152,7 @@ def main() -> None:
     module = optimisers_module(args.optimisers_from)
     config = module.OptimiserConfig()
     load_before = os.getloadavg()
-    f, source = objective(args.store, args.campaign)
+    f, source = objective(require_input(args.store, QUICK_RUN + " --env racing"), args.campaign)
     per_seed = [time_suggestions(args.observations, seed, f, config, module.make_optimiser) for seed in range(args.repeats)]
     timings = {}
     for n in args.observations:
@@ -174,7 +174,7 @@ def main() -> None:
         "load_after": [round(x, 2) for x in os.getloadavg()],
     }
     if args.compare:
-        entry["compare"] = compare_run(args.run, args.budget, args.seeds, module)
+        entry["compare"] = compare_run(require_input(args.run, QUICK_RUN + " --env racing"), args.budget, args.seeds, module)
         print(json.dumps(entry["compare"]["best_at"]), f"wall {entry['compare']['wall_s']} s", flush=True)
     payload = json.loads(OUT.read_text()) if OUT.exists() else {"benchmark": "bo-suggestion"}
     payload["machine"] = describe_machine()

@@ -51,7 +51,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import QUICK_RUN, RESULTS, describe_machine, require_input  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
@@ -352,7 +352,7 @@ def main(argv=None) -> dict:
     algo = args.algo or defaults["algo"]
     options = spec.parse_options(args.option) if args.option else spec.check_options(defaults["options"])
     episodes = args.episodes or defaults["episodes"]
-    generator_dir = args.generator or Path("runs/quick") / spec.name / "generator"
+    generator_dir = require_input(args.generator or Path("runs/quick") / spec.name / "generator", f"{QUICK_RUN} --env {spec.name}")
     work = args.work or Path("runs") / f"curriculum-{spec.name}"
     target_text = args.target or spec.failure
     config = training_config(spec, algo, episodes=episodes, options=options)

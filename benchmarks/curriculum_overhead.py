@@ -24,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from curriculum import paper_defaults  # noqa: E402
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import QUICK_RUN, RESULTS, describe_machine, require_input  # noqa: E402
 from worldagent.agents.algorithms import get_algorithm, training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
 from worldagent.curricula import make_curriculum  # noqa: E402
@@ -50,7 +50,8 @@ def main(argv=None) -> dict:
     algo = args.algo or defaults["algo"]
     options = spec.parse_options(args.option) if args.option else spec.check_options(defaults["options"])
     config = training_config(spec, algo, episodes=10**9, options=options)
-    latents = world_distribution(spec, "vae", generator_dir=args.generator or Path("runs/quick") / spec.name / "generator")
+    generator_dir = require_input(args.generator or Path("runs/quick") / spec.name / "generator", f"{QUICK_RUN} --env {spec.name}")
+    latents = world_distribution(spec, "vae", generator_dir=generator_dir)
     env, params = spec.make_env(options)
     settings = {"buffer_size": 256, "min_fill": 0.25}  # small, so that replay begins within the warm-up
     trainers, states = {}, {}

@@ -20,7 +20,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import record  # noqa: E402
+from machine import QUICK_RUN, record, require_input  # noqa: E402
 from worldagent.worlds.generator import load_generator  # noqa: E402
 
 
@@ -42,7 +42,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=20)
     parser.add_argument("--agree", type=int, default=20_000)
     args = parser.parse_args()
-    folded = load_generator(args.generator)[0]
+    folded = load_generator(require_input(args.generator, QUICK_RUN + " --env racing"))[0]
     if folded.folded is None:
         raise SystemExit(f"the generator in {args.generator} has no folded repair (racing's nearest-track repair has one).")
     plain = folded.replace(folded=None)

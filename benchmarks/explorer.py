@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import record  # noqa: E402
+from machine import QUICK_RUN, record, require_input  # noqa: E402
 
 
 def percentiles(seconds: list[float]) -> dict:
@@ -123,7 +123,7 @@ def main() -> None:
     from worldagent.explore.session import Session
 
     start = time.perf_counter()
-    session = Session.open(args.run)
+    session = Session.open(require_input(args.run, QUICK_RUN))
     open_s = time.perf_counter() - start
     server = uvicorn.Server(uvicorn.Config(make_app(session), host="127.0.0.1", port=args.port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)

@@ -37,7 +37,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from failure_rate import generator_hash  # noqa: E402
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import QUICK_RUN, RESULTS, describe_machine, require_input  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.evaluation.local import evaluate  # noqa: E402
 
@@ -65,7 +65,7 @@ AGENTS = {  # what the quick preset leaves per env (reproduce/layout.py): the ag
 
 def load_setup(run: Path, env: str, agent: str | None, repeats: int):
     """The experiment's setup from a reproduce run directory (its trained agent and generator, or ``agent``)."""
-    where = run / env
+    where = require_input(run / env, f"{QUICK_RUN} --env {env}")
     return experiments.setup(env, agent or str(where / AGENTS[env]["agent"]), str(where / AGENTS[env]["generator"]), repeats=repeats)
 
 

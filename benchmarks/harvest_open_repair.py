@@ -1,7 +1,7 @@
 """Harvest's open repair against the nearest one, on a trained generator's decodes.
 
-    worldagent generator train harvest --out /tmp/harvest-gen --n 5000 --epochs 100
-    python benchmarks/harvest_open_repair.py --generator /tmp/harvest-gen [--decodes 1000] [--seeds 0 1 2]
+    worldagent generator train harvest --out runs/harvest-gen --n 5000 --epochs 100
+    python benchmarks/harvest_open_repair.py --generator runs/harvest-gen [--decodes 1000] [--seeds 0 1 2]
 
 Per repair (``nearest``: the dataset layout the wall logits score highest; ``open``:
 ``OpenRooms``, the generator layout they score highest; ``open_likelihood_entrances``: the same
@@ -82,7 +82,12 @@ def describe(maps, wall_logit: np.ndarray, known: set, apples: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--generator", type=Path, default=Path("/tmp/harvest-gen"))
+    parser.add_argument(
+        "--generator",
+        type=Path,
+        required=True,
+        help="a trained harvest generator directory (make one: worldagent generator train harvest --out DIR --n 5000 --epochs 100)",
+    )
     parser.add_argument("--decodes", type=int, default=1000)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--recover", type=int, default=1000, help="generated maps for the recovery check")

@@ -9,6 +9,26 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
+QUICK_RUN = "worldagent reproduce --preset quick"  # writes runs/quick: both envs' generator, agent and store
+
+
+def require_input(path: Path | str, made_by: str) -> Path:
+    """``path`` if it exists, else exit with one line naming the command that makes it.
+
+    Benchmarks default their inputs to where a documented command writes them inside the checkout
+    (``runs/quick/...``), never to a path of one machine; a fresh checkout has none of them yet.
+
+    Args:
+        path: an input file or directory an earlier run made.
+        made_by: the command that makes it there.
+
+    Returns:
+        ``path`` as a ``Path``.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise SystemExit(f"{path} does not exist: make it with `{made_by}`, or pass another")
+    return path
 
 
 def describe_machine() -> dict:

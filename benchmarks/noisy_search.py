@@ -1,7 +1,7 @@
 """Searches that survive noise, compared at equal episode budgets on confirmed values (issue 50, item 4).
 
     python benchmarks/noisy_search.py --env racing --agent RUN/racing/agent --generator RUN/racing/generator \
-        [--budget 210] [--seeds 0 1 2 3 4] [--work /tmp/noisy-search]
+        [--budget 210] [--seeds 0 1 2 3 4] [--work runs/noisy-search]
     python benchmarks/noisy_search.py --merge   # the per-env parts -> benchmarks/results/noisy-search.json
 
 For each seed, every method minimises the env's main metric over the generator's latents with ``--budget``
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import QUICK_RUN, RESULTS, describe_machine  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.agents.policy import agent_record  # noqa: E402
 from worldagent.analysis.confirm import ELITE_REPEATS, REPEATS, confirm  # noqa: E402
@@ -253,12 +253,16 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     parser.add_argument("--methods", nargs="+")
     parser.add_argument("--elites", type=int, default=8, help="failing elites confirmed per atlas, at most")
-    parser.add_argument("--work", type=Path, default=Path("/tmp/noisy-search"))
+    parser.add_argument("--work", type=Path, default=Path("runs/noisy-search"))
     parser.add_argument("--merge", action="store_true")
     parser.add_argument("--note", default="", help="with --merge: what the JSON should say about the run (e.g. the machine's load)")
     args = parser.parse_args()
     if args.merge:
         merge(args)
+    elif not (args.env and args.agent and args.generator):
+        parser.error(
+            f"--env, --agent and --generator are needed to search: `{QUICK_RUN}` writes them to runs/quick/ENV/agent and runs/quick/ENV/generator"
+        )
     else:
         run_env(args)
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import record  # noqa: E402
+from machine import QUICK_RUN, record, require_input  # noqa: E402
 
 CAMPAIGN = "cmaes-min-return-s0"
 
@@ -107,7 +107,7 @@ def main() -> None:
     parser.add_argument("--budget", type=int, default=210)
     parser.add_argument("--busy", type=int, default=1, help="processes spinning on the CPU meanwhile")
     args = parser.parse_args()
-    generator = args.run / "racing" / "generator"
+    generator = require_input(args.run / "racing" / "generator", QUICK_RUN + " --env racing")
     spinners = [multiprocessing.Process(target=spin, args=(24 * 3600,), daemon=True) for _ in range(args.busy)]
     for process in spinners:
         process.start()

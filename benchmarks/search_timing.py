@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import record  # noqa: E402
+from machine import record, require_input  # noqa: E402
 from worldagent.experiments import setup  # noqa: E402
 from worldagent.search.objectives import LatentObjective, Objective  # noqa: E402
 from worldagent.search.optimisers import make_optimiser  # noqa: E402
@@ -44,7 +44,8 @@ def main() -> None:
     parser.add_argument("--agent", default="driver", help="a scripted policy's name or a `worldagent train` run directory")
     args = parser.parse_args()
 
-    run = setup(args.env, args.agent, args.generator, repeats=8)
+    generator = require_input(args.generator, f"python benchmarks/vae_training.py --env {args.env} --out {args.generator}")
+    run = setup(args.env, args.agent, generator, repeats=8)
     generator = run.generator
     objective = LatentObjective(Objective(run.spec.name, "reward", False), run.env, run.policy, generator, run.repeats, run.params, keep_worlds=False)
     cmaes = make_optimiser("cmaes", generator.latent_dim, maximize=False, seed=0)

@@ -42,7 +42,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from curriculum import agent_statistics, pooled_vs_dr, world_values  # noqa: E402
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import RESULTS, describe_machine, require_input  # noqa: E402
 from worldagent import experiments  # noqa: E402
 from worldagent.agents.algorithms import training_config  # noqa: E402
 from worldagent.agents.distributions import world_distribution  # noqa: E402
@@ -175,7 +175,8 @@ def main(argv=None) -> dict:
     env_steps = args.env_steps or jaxued["env_steps_per_run"]
     if not env_steps:
         raise SystemExit(f"no budget: run benchmarks/ued_maze_jaxued.py first (it writes {args.jaxued}) or pass --env-steps.")
-    latents = world_distribution(spec, "vae", generator_dir=args.generator)
+    generator_dir = require_input(args.generator, f"pip install -e examples/ued_maze && worldagent generator train ued_maze --out {args.generator}")
+    latents = world_distribution(spec, "vae", generator_dir=generator_dir)
     generator = latents.generator
     _, params = spec.make_env({})
     prefabs = spec.world_sets["prefabs"]()

@@ -1,14 +1,15 @@
 """jaxued's own maze PLR / ACCEL / DR examples, run as they ship, for issue 42 item 5.
 
-    python benchmarks/ued_maze_jaxued.py --num-updates 150 --eval-freq 50 --seeds 0 1 2 3 4   # docs/ued-maze.md
+    git clone https://github.com/DramaCow/jaxued JAXUED && git -C JAXUED checkout 0f8f128   # once, anywhere
+    python benchmarks/ued_maze_jaxued.py --jaxued JAXUED --num-updates 150 --eval-freq 50 --seeds 0 1 2 3 4   # docs/ued-maze.md
     python benchmarks/ued_maze_jaxued.py --table   # the JSON's results as Markdown tables
-    python benchmarks/ued_maze_jaxued.py --jaxued ~/src/jaxued --arms plr --seeds 0   # a clone instead
-    python benchmarks/ued_maze_jaxued.py --num-updates 40 --eval-freq 20 --seeds 0 --work runs/ued-maze-jaxued-probe --out runs/ued-maze-jaxued-probe40.json  # throughput probe
+    python benchmarks/ued_maze_jaxued.py --jaxued JAXUED --num-updates 150 --arms plr --seeds 0   # one arm, one seed
+    python benchmarks/ued_maze_jaxued.py --jaxued JAXUED --num-updates 40 --eval-freq 20 --seeds 0 --work runs/ued-maze-jaxued-probe --out runs/ued-maze-jaxued-probe40.json  # throughput probe
 
 The examples (``examples/maze_dr.py``, ``examples/maze_plr.py``) are not in jaxued's wheel, and
 the wheel's library (0.0.1) still calls ``jax.tree_map``, gone from jax 0.10. So the run takes a
-jaxued checkout (``--jaxued``: by default the stored GitHub snapshot, read with ``git archive``;
-a plain clone works too), copies its ``src/`` and the two example scripts into ``--work``, and
+jaxued checkout (``--jaxued``, required to run: a clone, or a bare snapshot read with
+``git archive``), copies its ``src/`` and the two example scripts into ``--work``, and
 applies the small list of string patches in ``PATCHES`` (each says what and why) there; their
 code is never committed here. The copy's ``src/`` comes first on ``PYTHONPATH``, so the examples
 run against the library of the same commit.

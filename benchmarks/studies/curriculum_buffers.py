@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: machine and the scripts imported
-from machine import RESULTS, describe_machine  # noqa: E402
+from machine import RESULTS, describe_machine, require_input  # noqa: E402
 from worldagent.curricula.snapshots import load_snapshots  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
@@ -71,7 +71,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     spec = registry.get(args.env)
     gen_dir = args.generator or Path(json.loads((RESULTS / f"curriculum-{args.env}.json").read_text())["generator"])
-    G, _, dataset = load_generator(gen_dir)
+    G, _, dataset = load_generator(require_input(gen_dir, f"python benchmarks/curriculum.py --env {args.env}"))
     rows = {"random": descriptor_means(spec, G, np.random.default_rng(0).standard_normal((args.random, G.latent_dim)))}
     per_seed = {}
     for arm in args.arms:

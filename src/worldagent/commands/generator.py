@@ -109,7 +109,40 @@ def key_figures(quality: dict) -> str:
         f"held-out NLL {recon['vae']['nll_per_world']:.1f} (mean world {recon['mean_image']['nll_per_world']:.1f}); "
         f"{measured['coverage_distinct_worlds']:,}/{measured['samples']:,} distinct decodes; a ±1 move along z changes {moves:.0%} of worlds"
         + (f"; spread under G(z) / dataset: {spreads}" if spreads else "")
+        + (f"; {coverage_line(measured['coverage'])}" if measured.get("coverage") else "")
     )
+
+
+def coverage_line(coverage: dict) -> str:
+    """Precision, recall, density and coverage of G(z) against fresh worlds (``worlds.coverage.coverage``), beside their floor."""
+    names = ("precision", "recall", "density", "coverage")
+    floor = coverage.get("floor")
+    return (
+        f"against {coverage['worlds']:,} fresh worlds: "
+        + ", ".join(f"{name} {coverage[name]:.2f}" + (f" ({floor[name]:.2f})" if floor else "") for name in names)
+        + (" (fresh against fresh in brackets)" if floor else "")
+    )
+
+
+def coverage_table(coverage: dict) -> str:
+    """Lines of each descriptor's 5/25/50/75/95% quantiles under G(z), fresh worlds and the dataset, and the
+    generator parameters' spread where the env declares them."""
+    from worldagent.worlds.coverage import QUANTILES
+
+    heading = "/".join(str(q) for q in QUANTILES)
+    lines = [f"quantiles {heading}%   G(z) | fresh worlds | dataset"]
+    for name, sides in coverage["quantiles"].items():
+        shown = " | ".join(" ".join(f"{value:.3g}" for value in sides[side]) for side in ("generator", "fresh", "dataset"))
+        lines.append(f"  {name:<22} {shown}")
+    params = coverage.get("generator_params")
+    if params:
+        rows = params["parameters"]
+        lines.append(
+            f"generator parameters, std under G(z) / fresh: median {params['median_std_ratio']:.2f}, lowest {params['min_std_ratio']:.2f} ("
+            + ", ".join(f"{name} {row['generator_std']:.3g}/{row['fresh_std']:.3g}" for name, row in rows.items())
+            + ")"
+        )
+    return "\n".join(lines)
 
 
 def print_warnings(warnings: list[str]) -> None:
@@ -223,7 +256,7 @@ def register(app: typer.Typer) -> None:
         samples: int = typer.Option(10_000, "--samples", help="Draws z ~ N(0, I) for coverage / validity."),
         seed: int = typer.Option(0, "--seed", help="Seed of those draws."),
     ) -> None:
-        """Measure the generator: reconstruction, self-mapping, coverage, validity and diversity."""
+        """Measure the generator: reconstruction, self-mapping, coverage of the dataset and of fresh procedural worlds, validity and diversity."""
         import json
 
         from worldagent.files import write_text
@@ -235,5 +268,7 @@ def register(app: typer.Typer) -> None:
         write_text(directory / QUALITY_FILE, json.dumps(figures, indent=1))
         typer.echo(json.dumps(figures, indent=1))
         typer.echo(structure_table(figures[figures["env"]]["structure"]))
+        if figures[figures["env"]].get("coverage"):
+            typer.echo(coverage_table(figures[figures["env"]]["coverage"]))
         console.print(key_figures(figures), highlight=False)
         print_warnings(figures["warnings"])

@@ -212,6 +212,10 @@ class EnvSpec:
             agents are scored on as they are, e.g. held-out evaluation sets such as the UED maze
             prefabs (``worldagent evaluate worlds ENV --worlds NAME``; ``worldagent check`` checks
             every world). Built on demand, so a large set costs nothing until asked for. Empty: none.
+        generator_params: ``batched worlds -> {parameter: f[N]}``: the procedural generator's own
+            draws as read back off its worlds (racing: its 20 checkpoint draws), for comparing their
+            spread under G(z) with fresh worlds' (``worlds.coverage``); None where they cannot be
+            read back cheaply and defensibly.
     """
 
     name: str
@@ -241,6 +245,7 @@ class EnvSpec:
     raw_decode: Callable[[Any], Any] | None = None
     repairs: Mapping[str, Callable[[Any, Mapping[str, Any]], Any]] = field(default_factory=dict)
     world_sets: Mapping[str, Callable[[], Any]] = field(default_factory=dict)
+    generator_params: Callable[[Any], Mapping[str, np.ndarray]] | None = None
 
     @property
     def default_algorithm(self) -> str:

@@ -93,6 +93,10 @@ def generator_section(run_dir: Path, results: dict) -> str:
         figures = quality.get(env, {})
         rows += [[name.replace("_", " "), fmt(value)] for name, value in figures.items() if not isinstance(value, dict)]
         rows += latent_rows(figures)
+        if figures.get("coverage"):  # G(z) against fresh procedural worlds (worlds.coverage); older quality.json files lack it
+            cover, names = figures["coverage"], ("precision", "recall", "density", "coverage")
+            floor = f" (fresh against fresh: {' / '.join(fmt(cover['floor'][n], 3) for n in names)})" if cover.get("floor") else ""
+            rows.append([f"against {fmt(cover['worlds'])} fresh worlds: {' / '.join(names)}", " / ".join(fmt(cover[n], 3) for n in names) + floor])
         return (
             warnings_list(quality.get("warnings", []))
             + table(["measure", "value"], rows)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from worldagent.envs.racing.open_repair import OpenTracks
@@ -147,6 +149,33 @@ def track_length(track) -> float:
     """Lap length in normalised units (the playfield is 2 wide)."""
     centreline = np.asarray(track.centreline, np.float64)
     return float(np.linalg.norm(np.diff(centreline, axis=0, append=centreline[:1]), axis=1).sum())
+
+
+@functools.lru_cache(maxsize=1)
+def _draw_reader():
+    """(the open repair, its jitted ``draws``), built once."""
+    import jax
+
+    return OpenTracks.from_dataset(None), jax.jit(lambda repair, logits: repair.draws(logits))
+
+
+def checkpoint_draws(tracks) -> dict[str, np.ndarray]:
+    """CarRacing's 20 checkpoint draws read back off tracks' footprints (``EnvSpec.generator_params``).
+
+    ``angle_k``: checkpoint k's angle within its 30-degree sector, ``radius_k``: its radius, k = 1..10,
+    each on the unit scale of upstream's uniform ranges (std 0.289 when drawn). Read as the open repair
+    reads a decode (``OpenTracks.draws``: the footprint's radial profile through its fitted inverse), on the
+    footprint rasters as certain logits: cheap (batched, jitted), not exact (on CarRacing's own tracks it
+    pulls angles towards their sectors' centres, issue 48), but the same reading on both sides, so G(z)
+    against fresh tracks compares like with like.
+    """
+    repair, read = _draw_reader()
+    raster = np.asarray(tracks.raster, bool).reshape(len(tracks.raster), -1)
+    logits = np.where(raster, 30.0, -30.0).astype(np.float32)  # sigmoid(±30) is 0 or 1 in float32
+    unit = np.concatenate([np.asarray(read(repair, logits[i : i + 1000])) for i in range(0, len(logits), 1000)])
+    free = unit.shape[1] // 2
+    names = [f"angle_{k}" for k in range(1, free + 1)] + [f"radius_{k}" for k in range(1, free + 1)]
+    return {name: unit[:, i].astype(np.float64) for i, name in enumerate(names)}
 
 
 def trace(state):
@@ -335,6 +364,7 @@ SPEC = register(
             "influence.reward_change_pct": -5.0,
         },
         episode_note=episode_note,
+        generator_params=checkpoint_draws,
         training_check=training_check,
     )
 )

@@ -97,6 +97,7 @@ SPEC = EnvSpec(
         highlighted=("reached",),
         descriptors={"wall_share": wall_share, "goal_distance": goal_distance},
         default_descriptors=("wall_share", "goal_distance"),
+        meanings={"return": "the toy's episode reward (higher is better)", "reached": "1 if the agent reached the goal, else 0"},
     ),
     trace=trace,
     pictures=Pictures(world=pictures.world_picture, episodes=pictures.draw_episodes, sheet=pictures.sheet),

@@ -79,6 +79,7 @@ class Metrics:
         highlighted: metrics reports show beside the main one (rates: mean over episodes).
         descriptors: ``name -> (world -> float)`` features of a world (for quality-diversity search).
         default_descriptors: the descriptors a QD archive uses unless told otherwise.
+        meanings: ``name -> what it measures``, in a line a newcomer reads (the explorer's tooltips and legends).
     """
 
     main: str
@@ -90,6 +91,7 @@ class Metrics:
     highlighted: tuple[str, ...] = ()
     descriptors: Mapping[str, Callable[[Any], float]] = field(default_factory=dict)
     default_descriptors: tuple[str, ...] = ()
+    meanings: Mapping[str, str] = field(default_factory=dict)
 
     def resolve(self, name: str, env: str = "this environment") -> str:
         """The canonical metric for ``name`` ("reward" is ``main``); unknown names are refused."""

@@ -53,6 +53,15 @@ def non_negative_float(text: str) -> float:
     return value
 
 
+MEANINGS = {  # each metric in a line (the explorer's tooltips and legends; envs/harvest/metrics.py has the formulas)
+    "group_reward": "apples collected by all agents together in the episode, one reward each (the paper's main harvest metric; higher is better)",
+    "conflict": "share of steps in which at least one agent was tagged out, 0 to 1 (lower is more peaceful)",
+    "equality": "1 - Gini of the agents' returns: 1 when all collected alike, 1/N when one took everything",
+    "sustainability": "mean step at which apples were collected (later means the orchard was not stripped early)",
+    "peace": "agents on the map per step, 0 to N (N: nobody was ever tagged out)",
+}
+
+
 def make(options):
     """``Harvest`` and params from the options: who may TAG (paper §6.2.2), the window, the beam, regrowth."""
     from worldagent.envs.harvest.env import Harvest, make_params, perolat_regrowth_table
@@ -263,6 +272,7 @@ SPEC = register(
                 "largest_patch": largest_patch,
             },
             default_descriptors=("wall_share", "apple_clustering"),
+            meanings=MEANINGS,
         ),
         trace=trace,
         pictures=Pictures(

@@ -113,6 +113,16 @@ def cells(tracks) -> np.ndarray:
     return raster.reshape(len(raster), -1).astype(np.uint8)
 
 
+MEANINGS = {  # each metric in a line (the explorer's tooltips and legends)
+    "return": "episode reward: +lap reward for a whole lap, -crash penalty for leaving the road, -step penalty every step (higher is better)",
+    "normalised_return": "the return scaled to [0, 1] between the worst and best the rules allow (paper §6; 1 is best)",
+    "crashed": "1 if the particle left the road this episode, else 0 (as a mean over episodes: the crash rate)",
+    "lap_completed": "1 if the episode ended with a whole lap on the road, else 0 (as a mean: the lap rate)",
+    "progress": "net laps driven along the centreline (negative when driving backwards)",
+    "steps": "steps the episode lasted (a crash or a lap ends it, else the step limit)",
+}
+
+
 def derive(metrics: dict, params) -> dict:
     """Add the normalised return (paper §6)."""
     from worldagent.envs.racing.metrics import normalised_return
@@ -284,6 +294,7 @@ SPEC = register(
             highlighted=("crashed",),
             descriptors={"total_curvature": total_curvature, "sharpest_corner": sharpest_corner, "track_length": track_length},
             default_descriptors=("total_curvature", "sharpest_corner"),
+            meanings=MEANINGS,
         ),
         trace=trace,
         pictures=Pictures(

@@ -65,6 +65,16 @@ def test_the_run_says_what_each_view_can_show(client):
     assert env["atlases"] == ["atlas-min-return-s0"] and env["animates"] and env["failure"] == "reached < 0.5"
 
 
+def test_the_run_says_what_each_metric_means_and_each_campaign_is(client, toy_spec):
+    (env,) = client.get("/api/run").json()["envs"]
+    # the spec's meanings of the metrics shown (the toy says nothing of "steps": no entry rather than an empty one)
+    assert env["meanings"] == dict(toy_spec.metrics.meanings) and set(env["meanings"]) == {"return", "reached"}
+    assert env["campaign_words"] == {
+        "random-return-s0": "Random worlds G(z) scored on return, 24 worlds, seed 0",
+        "atlas-min-return-s0": "Atlas (CMA-ME) minimising return over wall_share × goal_distance, 24 evaluations, seed 0",
+    }
+
+
 def test_the_map_places_every_stored_world_by_its_latent(client, toy_run):
     found = client.get("/api/toy/map").json()
     evaluations = stored(toy_run)
@@ -435,6 +445,7 @@ def test_a_diff_written_while_serving_shows_on_the_next_request_with_its_agents(
     by_hand = sum(np.mean([e["reached"] for e in ev.episodes]) < 0.5 <= np.mean([e["A.reached"] for e in ev.episodes]) for ev in late)
     assert (found["campaign"], found["worlds"], found["regressed"]) == ("diff-late-s0", len(late), by_hand) and by_hand > 0
     assert found["agents"] == ["diff/A", "diff/B"] and found["pair"] == {"A": "scripted homing", "B": "scripted random"}
+    assert found["campaign_words"]["diff-late-s0"] == "Diff of two agents on given worlds, 24 worlds, seed 0"  # the page's select names it in words
     after = client.get("/api/run").json()["envs"][0]
     assert after["diffs"] == ["diff-late-s0"] and {"diff/A", "diff/B"} <= set(after["agents"]) and after["worlds"] == before["worlds"] + len(late)
     new_map, n = client.get("/api/toy/map").json(), len(old_map["x"])

@@ -78,7 +78,7 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
     """The regressed worlds of diff campaign ``campaign`` (default: the first) under ``event`` (default: the env's failure).
 
     Returns:
-        {"campaign", "campaigns", "agents": [label A, label B] (those loadable), "pair": {"A", "B"} (what each
+        {"campaign", "campaigns", "campaign_words" (``EnvSession.campaign_words``: one written since the page loaded too), "agents": [label A, label B] (those loadable), "pair": {"A", "B"} (what each
         agent is, ``agent_text``), "event", "worlds",
         "regressed", "improved", "rows": [{"index", "log_prior", "a", "b" ({metric: mean}),
         "nearest_passing" (index or None), "distance", "replay", "nearest_replay" (``replay``'s
@@ -121,6 +121,7 @@ def diff_view(session: Any, campaign: str | None, event: str | None, limit: int)
     return {
         "campaign": campaign,
         "campaigns": list(campaigns),
+        "campaign_words": session.campaign_words(),
         "agents": [label for label in pair_labels(campaigns)[campaign] if label in loadable],
         "pair": {side.upper(): agent_text(campaigns[campaign][side]) for side in ("a", "b")},
         "event": selection.describe(),

@@ -166,6 +166,7 @@ class EnvSession:
             "latent_dim": self.latent_dim,
             "worlds": len(self.evaluations),
             "metrics": list(self.means),
+            "meanings": {name: spec.metrics.meanings[name] for name in self.means if name in spec.metrics.meanings},
             "main": spec.metrics.main if spec.metrics.main in self.means else next(iter(self.means), None),
             "highlighted": [m for m in spec.metrics.highlighted if m in self.means],
             "failure": spec.failure,
@@ -177,7 +178,18 @@ class EnvSession:
             "key": picture_key(spec.pictures),
             "atlases": self.atlas_names(),
             "diffs": list(diff_campaigns(self.run, self.env)),
+            "campaign_words": self.campaign_words(),
         }
+
+    def campaign_words(self) -> dict[str, str]:
+        """{campaign: what it is, in words} of every campaign in the store (``search.names.describe_campaign``,
+        from its recorded config), in store order."""
+        from worldagent.search.names import describe_campaign
+
+        if not self.run.has_store(self.env):
+            return {}
+        with self.run.store(self.env) as store:
+            return {c.name: describe_campaign(c, c.name) for c in store.campaigns()}
 
     # -- stored worlds --------------------------------------------------------------------------
 

@@ -50,6 +50,14 @@ function viewError(view, fresh, error) {
 }
 
 function envInfo() { return state.run.envs.find((e) => e.name === state.env); }
+function meaning(metric) { return (envInfo().meanings || {})[metric] || ""; }
+function campaignWords(id) {
+  // a campaign in words (search.names.describe_campaign, from its recorded config), or its id where the store has no record
+  const words = (envInfo().campaign_words || {})[id];
+  return words && words !== id ? words : "";
+}
+function campaignHtml(id) { const words = campaignWords(id); return words ? `${esc(words)} <code>${esc(id)}</code>` : `<code>${esc(id)}</code>`; }
+function campaignOptions(ids) { return ids.map((d) => `<option value="${esc(d)}">${esc(campaignWords(d) ? `${campaignWords(d)} (${d})` : d)}</option>`).join(""); }
 function zParam(z) { return z.map((v) => v.toFixed(3)).join(","); }
 
 function readHash() { return Object.fromEntries(new URLSearchParams(location.hash.slice(1))); }
@@ -80,9 +88,10 @@ async function selectEnv(name) {
   newWorld();  // nothing of the previous environment's plays stays on screen
   state.world = null; state.z = null; state.baseZ = null; state.played = false;
   $("world-title").textContent = ""; $("world-info").innerHTML = "";
-  $("map-metric").innerHTML = info.metrics.map((m) => `<option>${esc(m)}</option>`).join("");
+  $("map-metric").innerHTML = info.metrics.map((m) => `<option title="${esc(meaning(m))}">${esc(m)}</option>`).join("");
   state.metric = info.metrics.includes(state.metric) ? state.metric : info.main;
   $("map-metric").value = state.metric;
+  metricMeaning();
   for (const id of ["agent", "agent2"]) {
     const keep = id === "agent2" ? '<option value="">none</option>' : "";
     $(id).innerHTML = keep + info.agents.map((a) => `<option>${esc(a)}</option>`).join("");
@@ -90,7 +99,7 @@ async function selectEnv(name) {
   $("event").placeholder = info.failure || "e.g. return < 0";
   $("diff-event").placeholder = info.failure || "e.g. return < 0";
   $("diff-tab").hidden = !info.diffs.length;
-  $("diff-campaign").innerHTML = info.diffs.map((d) => `<option>${esc(d)}</option>`).join("");
+  $("diff-campaign").innerHTML = campaignOptions(info.diffs);
   clearTables();
   buildSliders(info.latent_dim);
   worldLegend();
@@ -162,6 +171,14 @@ function drawMap() {
   drawOpenWorld(ctx, place);
 }
 
+function metricMeaning() {
+  // what the chosen metric measures (the env spec's Metrics.meanings): the select's tooltip and a line of the map's legend
+  const text = meaning(state.metric);
+  $("map-metric").title = text ? `${state.metric}: ${text}` : "";
+  $("map-meaning").hidden = !text;
+  $("map-meaning").innerHTML = text ? `<div class="row"><b>${esc(state.metric)}</b>: ${esc(text)}</div>` : "";
+}
+
 function worseEnd(metric) { return (envInfo().worse || {})[metric] || null; }
 
 function worseNote(metric) {
@@ -201,7 +218,7 @@ function campaignLegend() {
   const repeats = map.campaigns.length > map.distinct_markers ?
     `<div class="row">campaigns past the ${map.distinct_markers}th reuse the markers of the first ones: untick campaigns to tell them apart</div>` : "";
   $("map-campaigns").innerHTML = "<h4>campaigns (marker: shape, filled or hollow)</h4>" + map.campaigns.map((name, c) =>
-    `<label class="row"><input type="checkbox" data-campaign="${c}" checked><canvas class="mk" width="16" height="16" data-campaign="${c}"></canvas>${esc(name)} (${counts[c]})</label>`).join("") + repeats;
+    `<label class="row"><input type="checkbox" data-campaign="${c}" checked><canvas class="mk" width="16" height="16" data-campaign="${c}"></canvas><span>${campaignHtml(name)} (${counts[c]})</span></label>`).join("") + repeats;
   for (const canvas of $("map-campaigns").querySelectorAll("canvas")) {
     drawMarker(canvas.getContext("2d"), map.markers[Number(canvas.dataset.campaign)], 8, 8, 4.5, "#555", null);
   }
@@ -249,7 +266,7 @@ function hoverMap(event) {
   const [px, py] = state.screen[i], value = (map.metrics[state.metric] || [])[i];
   $("map-hover-img").src = `/api/${state.env}/world/${i}.png?size=160`;
   const failing = map.failing ? (map.failing[i] ? ` · fails ${map.failure}` : " · passes") : "";
-  $("map-hover-text").textContent = `world ${i} · ${map.campaigns[map.campaign[i]]} · ${state.metric} ${fmt(value)}${failing}`;
+  $("map-hover-text").textContent = `world ${i} · ${campaignWords(map.campaigns[map.campaign[i]]) || map.campaigns[map.campaign[i]]} · ${state.metric} ${fmt(value)}${failing}`;
   box.style.left = `${px + 12}px`;
   box.style.top = `${py + 12}px`;
   box.hidden = false;
@@ -327,9 +344,9 @@ async function loadFailures() {
     const picture = (i) => `<img loading="lazy" data-world="${i}" src="/api/${state.env}/world/${i}.png?size=72" alt="world ${i}"> ${i}`;
     table.innerHTML = `<tr><th>#</th><th>failing world</th><th title="log N(z; 0, I): higher is likelier under the generator's prior">log p(z)</th>` +
       `<th title="how far its means lie past the event's thresholds, in the metrics' units">severity (past the threshold)</th><th title="failing evaluations of this repaired world (latents that repair to one world count once)">failing evaluations</th>` +
-      metricNames.map((m) => `<th>${esc(m)}</th>`).join("") + `<th>nearest passing world</th>` + metricNames.map((m) => `<th>${esc(m)} there</th>`).join("") + `<th>latent distance</th></tr>` +
+      `<th title="the campaign that stored this evaluation">found by</th>` + metricNames.map((m) => `<th title="${esc(meaning(m))}">${esc(m)}</th>`).join("") + `<th>nearest passing world</th>` + metricNames.map((m) => `<th>${esc(m)} there</th>`).join("") + `<th>latent distance</th></tr>` +
       found.rows.map((row, k) => `<tr><td class="num">${k + 1}</td><td>${picture(row.index)}</td>` +
-        `<td class="num">${fmt(row.log_prior)}</td><td class="num">${fmt(row.severity)}</td><td class="num">${row.evaluations}</td>` +
+        `<td class="num">${fmt(row.log_prior)}</td><td class="num">${fmt(row.severity)}</td><td class="num">${row.evaluations}</td><td class="campaign">${campaignHtml(row.campaign)}</td>` +
         metricNames.map((m) => `<td class="num">${fmt(row.metrics[m])}</td>`).join("") +
         (row.nearest_passing === null ? `<td>none</td>${metricNames.map(() => "<td></td>").join("")}<td></td>` :
           `<td>${picture(row.nearest_passing)}</td>` + metricNames.map((m) => `<td class="num">${fmt(row.nearest_metrics[m])}</td>`).join("") + `<td class="num">${fmt(row.distance)}</td>`) +
@@ -357,7 +374,8 @@ async function loadDiff() {
     state.diff = found;
     if (found.campaigns.join("\n") !== envInfo().diffs.join("\n")) {  // a diff written since the page loaded joins the list
       envInfo().diffs = found.campaigns;
-      $("diff-campaign").innerHTML = found.campaigns.map((d) => `<option>${esc(d)}</option>`).join("");
+      envInfo().campaign_words = { ...envInfo().campaign_words, ...found.campaign_words };
+      $("diff-campaign").innerHTML = campaignOptions(found.campaigns);
       $("diff-campaign").value = found.campaign;
     }
     const pair = found.pair ? ` · A: ${found.pair.A}, B: ${found.pair.B}` : "";
@@ -410,7 +428,7 @@ async function start() {
 }
 
 $("env").addEventListener("change", (e) => selectEnv(e.target.value).then(() => show(state.view || "map")));
-$("map-metric").addEventListener("change", (e) => { state.metric = e.target.value; drawMap(); writeHash({ view: "map", env: state.env, metric: state.metric }); });
+$("map-metric").addEventListener("change", (e) => { state.metric = e.target.value; metricMeaning(); drawMap(); writeHash({ view: "map", env: state.env, metric: state.metric }); });
 $("map-scale").addEventListener("change", drawMap);
 $("map-failing-only").addEventListener("change", drawMap);
 $("map-canvas").addEventListener("mousemove", hoverMap);

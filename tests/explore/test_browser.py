@@ -100,9 +100,9 @@ def browser():
 
 
 @contextlib.contextmanager
-def opened(browser, url: str):
-    """A fresh page on ``url``, failing the test on any console error or uncaught exception."""
-    page = browser.new_page(viewport={"width": 1400, "height": 900})
+def opened(browser, url: str, viewport: tuple[int, int] = (1400, 900)):
+    """A fresh page on ``url`` at ``viewport`` (width, height), failing the test on any console error or uncaught exception."""
+    page = browser.new_page(viewport={"width": viewport[0], "height": viewport[1]})
     errors: list[str] = []
     page.on("console", lambda message: errors.append(message.text) if message.type == "error" else None)
     page.on("pageerror", lambda error: errors.append(str(error)))
@@ -404,6 +404,48 @@ def test_every_view_names_what_it_shows(page):
         head = text(page, "#failures-table tr")
         assert "severity" in head and "there" in head  # each failing world's metrics, and its nearest passing world's
         assert "Severity:" in text(page, "#failures-help")
+
+
+NEWCOMER_SCREEN = (1400, 950)  # a laptop's browser window: what a newcomer sees without scrolling
+
+
+def test_a_newcomer_reads_what_metrics_and_campaigns_are_and_sees_the_episode_colours(browser, explorer_url):
+    """Each metric's meaning (the spec's ``Metrics.meanings``) on the metric select and in the Map legend; each campaign
+    in words beside its id (Map legend, Failures table); the per-episode colour key on screen after a play, unscrolled."""
+    env = os.environ.get("WORLDAGENT_EXPLORER_ENV", "")
+    with opened(browser, explorer_url + (f"#env={env}" if env else ""), NEWCOMER_SCREEN) as page:
+        info = page.evaluate("explorer.state.run.envs.find(e => e.name === explorer.state.env)")
+        metric = page.evaluate("explorer.state.metric")
+        meaning = info["meanings"][metric]
+        assert page.get_attribute("#map-metric", "title") == f"{metric}: {meaning}" and meaning in text(page, "#map-meaning")
+        other = next(m for m in info["metrics"] if m != metric and m in info["meanings"])
+        page.select_option("#map-metric", other)  # the tooltip and the legend follow the chosen metric
+        assert info["meanings"][other] in page.get_attribute("#map-metric", "title") and info["meanings"][other] in text(page, "#map-meaning")
+        legend = text(page, "#map-campaigns")
+        for campaign in page.evaluate("explorer.state.map.campaigns"):
+            words = info["campaign_words"][campaign]
+            assert words != campaign and f"{words} {campaign}" in legend  # the words, then the id
+
+        open_world(page, 0)
+        page.fill("#episodes", page.get_attribute("#episodes", "max"))  # the longest key a play makes
+        page.click("#play")
+        page.wait_for_function(PLAYED, timeout=WAIT_MS)
+        if len(info["key"]["agents"]) <= 1:  # one agent: a colour per episode (several: a colour per agent, in the env's key)
+            assert page.locator("#play-legend .row").count() == int(page.input_value("#episodes"))
+        rows = page.locator("#world-legend .row, #play-legend .row")
+        assert page.evaluate("window.scrollY") == 0
+        for k in range(rows.count()):  # every colour of the key, with its label, inside the window
+            box = rows.nth(k).bounding_box()
+            assert (
+                box["x"] >= 0 and box["y"] >= 0 and box["x"] + box["width"] <= NEWCOMER_SCREEN[0] and box["y"] + box["height"] <= NEWCOMER_SCREEN[1]
+            ), box
+
+        if info["failure"]:
+            page.click("button[data-view='failures']")
+            page.wait_for_selector("#failures-table img", timeout=WAIT_MS)
+            found = page.evaluate("explorer.state.run.envs.find(e => e.name === explorer.state.env).campaign_words")
+            first = text(page, "#failures-table tr:nth-child(2) td.campaign")
+            assert any(first == f"{words} {name}" for name, words in found.items()), first
 
 
 def status_text(page) -> str:

@@ -82,6 +82,28 @@ def test_the_feature_space_standardises_descriptors_and_drops_constant_ones():
     assert np.var(features[:, 1]) >= np.var(features[:, 4])  # components keep their order of variance (not whitened)
 
 
+def test_an_embedding_fitted_on_other_worlds_scores_two_samples_of_noise_alike():
+    """Principal directions fitted on the reference worlds themselves fit their noise and spread them wider than any other sample."""
+    rng = np.random.default_rng(0)
+    real, fake, other = ((rng.random((200, 300)) < 0.1).astype(np.uint8) for _ in range(3))
+    fair = FeatureSpace.fit({}, real, basis=other)
+    scores = {**precision_recall(fair({}, real), fair({}, fake)), **density_coverage(fair({}, real), fair({}, fake))}
+    assert scores["recall"] > 0.85 and scores["density"] == pytest.approx(1.0, abs=0.15)
+    own = FeatureSpace.fit({}, real)
+    assert precision_recall(own({}, real), own({}, fake))["recall"] < 0.5
+
+
+def test_principal_directions_from_the_gram_matrix_are_the_svds():
+    from worldagent.worlds.coverage import _principal_directions
+
+    rows = np.random.default_rng(1).normal(size=(50, 80)) * np.linspace(3.0, 0.1, 80)
+    rows -= rows.mean(axis=0)
+    directions, explained = _principal_directions(rows, 4)
+    _, singular, expected = np.linalg.svd(rows, full_matrices=False)
+    np.testing.assert_allclose(np.abs(directions @ expected[:4].T), np.eye(4), atol=1e-8)  # the same axes, up to sign
+    assert explained == pytest.approx((singular[:4] ** 2).sum() / (singular**2).sum())
+
+
 def test_quantiles_and_parameter_spread_side_by_side():
     values = np.arange(101.0)
     table = descriptor_quantiles({"generator": {"d": values / 2}, "fresh": {"d": values}})

@@ -3,12 +3,15 @@ shows: settings unlike the paper preset, the generator's gate warnings) and sect
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import pytest
 
-from worldagent.reports.departures import departures, departures_section, differs, likely_cause, paper_config, run_differences
+from worldagent.reports.departures import departures, departures_section, differs, likely_cause, run_differences
 from worldagent.reports.results import Headline, influence_headlines
+from worldagent.reproduce.pipeline import settings_record
+from worldagent.reproduce.presets import get_preset
 from worldagent.runs import PHASES
 
 
@@ -28,6 +31,12 @@ def test_a_number_differs_when_off_by_a_quarter_or_of_the_other_sign(ours, paper
     assert differs(ours, paper) is apart
 
 
+def recorded(preset: str, env: str, phase: str, **changes) -> dict:
+    """A phase's manifest entry as ``reproduce`` records it at ``preset``, with ``changes`` made to its settings."""
+    about = settings_record(get_preset(preset), env, phase)
+    return {"status": "done", "config": {"recorded": True}, **about, "full_config": {**about["full_config"], **changes}}
+
+
 def harvest_results(seeds=(0,)):
     """What ``results.env_results`` gives for a quick-like harvest run (only what the box reads)."""
     summary = {
@@ -35,12 +44,9 @@ def harvest_results(seeds=(0,)):
         "conflict": {"default": {"mean": 0.071}, "influenced": {"mean": 0.05}},
         "group_reward": {"default": {"mean": 150.0}, "influenced": {"mean": 160.0}},
     }
-    phases = {
-        "agent": {"status": "done", "config": {"episodes": 1000}},
-        "random": {"status": "done", "config": {"worlds": 200, "repeats": 8}},
-        "strategic": {"status": "done", "config": {"budget": 105, "repeats": 8}},
-        "influence": {"status": "done", "config": {"seeds": list(seeds), "episodes": 1000, "eval_worlds": 100, "repeats": 8}},
-    }
+    phases = {phase: recorded("paper", "harvest", phase) for phase in PHASES}
+    phases["agent"] = recorded("paper", "harvest", "agent", episodes=1000)
+    phases["influence"] = recorded("paper", "harvest", "influence", seeds=list(seeds))
     return {"harvest": {"phases": phases, "influence": {"summary": summary, "config": {"seeds": list(seeds)}}}}
 
 
@@ -73,14 +79,13 @@ OVERFIT = "overfit: held-out reconstruction no better than the mean world (NLL 2
 
 
 def racing_as_paper(**changes):
-    """A racing run whose every phase recorded the paper preset's config, with ``{phase: {field: value}}`` changed."""
-    phases = {phase: {"status": "done", "config": {**paper_config("racing", phase), **changes.get(phase, {})}} for phase in PHASES}
-    return {"racing": {"phases": phases}}
+    """A racing run whose every phase recorded the paper preset's settings, with ``{phase: {field: value}}`` changed."""
+    return {"racing": {"phases": {phase: recorded("paper", "racing", phase, **changes.get(phase, {})) for phase in PHASES}}}
 
 
 def test_a_run_with_the_paper_settings_may_call_a_gap_real():
     results = racing_as_paper()
-    assert run_differences("racing", results["racing"]) == []
+    assert run_differences(results["racing"]) == []
     cause = likely_cause(CRASHED, results)
     assert "unexplained" in cause and "real difference" in cause and "paper preset:" not in cause
     assert "every setting its phases recorded matches the paper's preset" in departures_section([CRASHED], results, "paper")
@@ -106,18 +111,38 @@ def test_each_setting_unlike_the_papers_is_named_and_the_gap_is_not_called_real(
 def test_an_omitted_setting_is_its_default_and_repeats_and_repair_count():
     """The quick preset records no options for racing (route, the default) where the paper's records rays; repeats and the repair
     are compared too."""
-    phases = racing_as_paper(random={"repeats": 2})["racing"]["phases"]
-    phases["agent"]["config"].pop("options")
-    phases["generator"]["config"]["repair"] = "open"  # reproduce --repair open; the paper preset records none: its default, nearest
-    found = {(d.phase, d.name): (d.ours, d.paper) for d in run_differences("racing", {"phases": phases})}
-    assert found == {("agent", "options.observation"): ("route", "rays"), ("random", "repeats"): (2, 8), ("generator", "repair"): ("open", "nearest")}
+    quick = get_preset("quick")
+    assert "options" not in quick.phase_config("racing", "agent") and quick.full_phase_config("racing", "agent")["options"]["observation"] == "route"
+    ours = dataclasses.replace(get_preset("paper"), repeats=2, repair="open")
+    phases = {phase: {"status": "done", **settings_record(ours, "racing", phase)} for phase in PHASES}
+    found = {(d.phase, d.name): (d.ours, d.paper) for d in run_differences({"phases": phases})}
+    assert found[("random", "repeats")] == (2, 8) and found[("generator", "repair")] == ("open", "nearest")
+    assert {name for _, name in found} == {"repeats", "repair"}
+    phases["agent"] = {"status": "done", **settings_record(quick, "racing", "agent")}
+    assert ("agent", "options.observation") in {(d.phase, d.name) for d in run_differences({"phases": phases})}
 
 
 def test_a_phase_without_recorded_settings_leaves_the_gap_unexplained():
+    """A manifest written before the paper preset's settings were recorded beside each phase's says so, and never calls a gap real."""
     results = racing_as_paper()
-    results["racing"]["phases"]["generator"]["config"] = {}
+    results["racing"]["phases"]["generator"] = {"status": "done", "config": {"epochs": 25}}
     cause = likely_cause(CRASHED, results)
-    assert cause.startswith("unexplained: the generator phase recorded no settings") and "real difference" not in cause
+    assert cause.startswith("unexplained: the generator phase recorded no paper-preset settings") and "real difference" not in cause
+
+
+def test_the_pipeline_records_what_the_report_compares(tmp_path):
+    """``reproduce`` writes each phase's settings, the paper preset's and its parents into the manifest, also for a phase done
+    before they were kept, so the report never reads a preset itself."""
+    from worldagent.reproduce.manifest import Manifest
+    from worldagent.reproduce.pipeline import run_phase
+
+    manifest, quick = Manifest.open(tmp_path), get_preset("quick")
+    config = quick.phase_config("racing", "random")
+    run_phase(manifest, "racing/random", config, lambda: {}, lambda _: None)
+    assert "paper_config" not in manifest.phase("racing/random")
+    run_phase(manifest, "racing/random", config, lambda: {}, lambda _: None, about=settings_record(quick, "racing", "random"))
+    entry = manifest.phase("racing/random")
+    assert entry["depends"] == ["generator", "agent"] and entry["paper_config"]["worlds"] == 1000 and entry["full_config"] == config
 
 
 def test_the_generators_gate_warnings_join_the_box_and_the_causes():

@@ -2,8 +2,9 @@
 
 The report opens with this box (``departures_section``), so a reader sees first which of the paper's
 numbers this run did not reproduce, and what may have caused it. Causes come only from facts the run
-recorded: every setting of its phases' configs (``manifest.json``) that differs from the env's
-``paper`` preset (``setting_differences``, the one place that computes "what differs from the paper":
+recorded: every setting its phases recorded (``manifest.json``'s ``full_config``) that differs from the
+env's ``paper`` preset's recorded beside it (``paper_config``; ``setting_differences``, the one place that
+computes "what differs from the paper":
 algorithm, env options such as racing's observation, VAE epochs, training episodes, budgets, repeats,
 seeds, repair), the generator's own gate warnings (``worldagent.worlds.quality.diagnose``), a
 normalisation the paper does not spell out, and one seed per arm. A number is called a real
@@ -12,8 +13,6 @@ difference only when none of these applies; each gap links to the section that h
 
 from __future__ import annotations
 
-import dataclasses
-import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,8 +22,6 @@ from worldagent.envs import registry
 from worldagent.reports.noise import share_note
 from worldagent.reports.page import esc, fmt
 from worldagent.reports.results import Headline
-from worldagent.reproduce.phases import DEPENDS
-from worldagent.reproduce.presets import EnvBudgets, get_preset
 
 RELATIVE_GAP = 0.25  # ours differs when it is off by more than a quarter of the paper's value ...
 ABSOLUTE_GAP = 0.05  # ... and by more than this (rates and normalised rewards live in [0, 1])
@@ -134,28 +131,6 @@ def seeds_of(res: dict) -> int | None:
     return len(config["seeds"]) if "seeds" in config else None
 
 
-def paper_config(env: str, phase: str) -> dict | None:
-    """The config ``phase`` of ``env`` would record at the ``paper`` preset (``Preset.phase_config``); None: the env has no paper preset."""
-    if "paper" not in registry.get(env).presets:
-        return None
-    return get_preset("paper").phase_config(env, phase)
-
-
-def with_defaults(env: str, phase: str, config: dict) -> dict:
-    """``config`` as JSON holds it, with what ``Preset.phase_config`` leaves out when it is the default (so that earlier
-    runs still match) written in: every env option (``spec.check_options``), the env's default repair, the influence
-    search's default and no confirmation of the influence selection."""
-    spec, filled = registry.get(env), dict(config)
-    if phase == "agent":
-        filled["options"] = spec.check_options(filled.get("options") or {})
-    if phase == "generator":
-        filled.setdefault("repair", spec.default_repair)
-    if phase == "influence":
-        filled.setdefault("search", {f.name: f.default for f in dataclasses.fields(EnvBudgets)}["influence_search"])
-        filled.setdefault("confirm", 0)
-    return json.loads(json.dumps(filled, default=list))
-
-
 def flat(config: dict, prefix: str = "") -> dict[str, Any]:
     """{"options.observation": "rays", ...}: nested settings dotted, so each is compared and named on its own."""
     out: dict[str, Any] = {}
@@ -167,12 +142,13 @@ def flat(config: dict, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def setting_differences(env: str, phase: str, recorded: dict) -> list[SettingDifference]:
-    """Every setting of ``phase``'s recorded config that differs from the env's paper preset (empty: none, or no paper preset)."""
-    theirs = paper_config(env, phase)
-    if theirs is None or not recorded:
+def setting_differences(phase: str, entry: dict) -> list[SettingDifference]:
+    """Every setting a phase recorded (``full_config``) that differs from the paper preset's, recorded beside it by
+    ``reproduce`` (empty: none differs, or the manifest holds no paper-preset settings)."""
+    ours, theirs = entry.get("full_config"), entry.get("paper_config")
+    if not ours or not theirs:
         return []
-    ours, theirs = flat(with_defaults(env, phase, recorded)), flat(with_defaults(env, phase, theirs))
+    ours, theirs = flat(ours), flat(theirs)
     names = [name for name in dict.fromkeys([*theirs, *ours]) if name not in IGNORED]
     return [
         SettingDifference(phase, name, ours.get(name, UNRECORDED), theirs.get(name, UNRECORDED))
@@ -181,20 +157,20 @@ def setting_differences(env: str, phase: str, recorded: dict) -> list[SettingDif
     ]
 
 
-def run_differences(env: str, res: dict) -> list[SettingDifference]:
-    """Every setting of every recorded phase of ``env`` that differs from its paper preset, in pipeline order."""
-    return [d for phase, entry in res["phases"].items() if phase in DEPENDS for d in setting_differences(env, phase, entry.get("config") or {})]
+def run_differences(res: dict) -> list[SettingDifference]:
+    """Every setting of every recorded phase of one env's run that differs from its paper preset, in pipeline order."""
+    return [d for phase, entry in res["phases"].items() for d in setting_differences(phase, entry)]
 
 
-def phases_behind(phase: str) -> list[str]:
-    """``phase`` and every phase it is computed from (``reproduce.phases.DEPENDS``), in pipeline order."""
+def phases_behind(phases: dict, phase: str) -> list[str]:
+    """``phase`` and every phase it is computed from (each phase's recorded ``depends``), in pipeline order."""
     found, todo = set(), [phase]
     while todo:
         name = todo.pop()
         if name not in found:
             found.add(name)
-            todo.extend(DEPENDS.get(name, ()))
-    return [name for name in DEPENDS if name in found]
+            todo.extend(phases.get(name, {}).get("depends", ()))
+    return [name for name in phases if name in found]
 
 
 def generator_warnings(res: dict) -> list[str]:
@@ -222,18 +198,18 @@ def causes(row: Headline, results: dict) -> list[str]:
     if kind == "influence" and seeds_of(res) == 1:
         found.append("one seed per arm: a single agent per arm cannot show the direction of a change")
     found += [f"the generator failed its own gate ({line.split(':')[0]})" for line in generator_warnings(res)]
-    behind = phases_behind(kind) if kind in DEPENDS else []
+    behind = phases_behind(res["phases"], kind) if kind in res["phases"] else []
     settings = [
         d.text()
         for phase in behind
-        for d in setting_differences(env, phase, res["phases"].get(phase, {}).get("config") or {})
+        for d in setting_differences(phase, res["phases"][phase])
         if not (d.phase == "influence" and d.name == "seeds" and seeds_of(res) == 1)  # said above
     ]
     if settings:
         found.append("settings unlike the paper preset: " + ", ".join(dict.fromkeys(settings)))
-    unrecorded = [phase for phase in behind if not res["phases"].get(phase, {}).get("config")]
-    if unrecorded or "paper" not in spec.presets:
-        what = f"the {', '.join(unrecorded)} phase recorded no settings" if unrecorded else f"{env} has no paper preset"
+    unrecorded = [phase for phase in behind if not res["phases"][phase].get("paper_config")]
+    if "paper" not in spec.presets or unrecorded:
+        what = f"{env} has no paper preset" if "paper" not in spec.presets else f"the {', '.join(unrecorded)} phase recorded no paper-preset settings"
         found.append(f"unexplained: {what}, so nothing says whether the run matched the paper's")
     if ("normalised" in row.key or "reward_change" in row.key) and spec.metrics.bounds is None:
         found.append("normalised by this run's best single episode, a rule the paper does not give")
@@ -281,7 +257,7 @@ def share_notes(results: dict) -> dict[str, str]:
 
 def settings_box(results: dict, preset: str | None) -> str:
     """The preset's line and, folded, every setting of the run that differs from the paper preset (``run_differences``)."""
-    found = {env: run_differences(env, res) for env, res in results.items()}
+    found = {env: run_differences(res) for env, res in results.items()}
     count = sum(len(d) for d in found.values())
     unmatched = [env for env in results if "paper" not in registry.get(env).presets]
     named = f"the <code>{esc(preset)}</code> preset" if preset else "its own settings"

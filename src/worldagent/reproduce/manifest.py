@@ -5,6 +5,8 @@ seed, package versions, the device, and per phase (``"<env>/agent"``, ..., ``"re
 
     status    "running" | "done" | "failed"
     config    the preset's slice this phase depends on (``Preset.phase_config``)
+    full_config, paper_config, depends
+              every setting, the paper preset's, the phases it is computed from (the report's departures)
     started, finished, wall_s, outputs, error
 
 It is rewritten atomically after every change of a phase, so a killed run leaves a manifest
@@ -94,9 +96,17 @@ class Manifest:
         entry = self.phase(key)
         return entry is not None and entry.get("status") == "done"
 
-    def start(self, key: str, config: dict) -> None:
-        self.data["phases"][key] = {"status": "running", "config": _normalise(config), "started": time.time()}
+    def start(self, key: str, config: dict, about: dict | None = None) -> None:
+        """Record ``key`` as running with ``config`` (what a resume compares) and ``about`` (what the report reads)."""
+        self.data["phases"][key] = {"status": "running", "config": _normalise(config), **(about or {}), "started": time.time()}
         self.save()
+
+    def annotate(self, key: str, about: dict | None) -> None:
+        """Add ``about`` to a phase recorded before it was kept (its config matched, so it describes the phase)."""
+        entry = self.data["phases"][key]
+        if about and any(entry.get(name) != value for name, value in about.items()):
+            entry.update(about)
+            self.save()
 
     def finish(self, key: str, outputs: dict) -> dict:
         entry = self.data["phases"][key]

@@ -22,8 +22,8 @@ from pathlib import Path
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.manifest import Manifest, phase_key
-from worldagent.reproduce.phases import PHASE_FUNCTIONS, EnvContext, compare_names, dependents
-from worldagent.reproduce.presets import PHASES, Preset
+from worldagent.reproduce.phases import CURRICULUM_DEPENDS, DEPENDS, PHASE_FUNCTIONS, EnvContext, compare_names, dependents
+from worldagent.reproduce.presets import PHASES, Preset, paper_phase_config
 
 TOLERATED = ("influence",)  # phases whose failure is a result, not the end of the run
 
@@ -84,6 +84,7 @@ def reproduce(
                 lambda p=phase: PHASE_FUNCTIONS[p](ctx),
                 echo,
                 tolerate=phase in TOLERATED,
+                about=settings_record(preset, env, phase),
             )
     from worldagent.reports.html import build_report
 
@@ -94,6 +95,13 @@ def reproduce(
 def report_outputs(path: Path, out: Path) -> dict:
     """The report phase's record: where the report is and how big."""
     return {"report": str(path.relative_to(out)), "summary": f"{path} ({path.stat().st_size / 1e6:.1f} MB)"}
+
+
+def settings_record(preset: Preset, env: str, phase: str) -> dict:
+    """What the report reads of a phase beside its config: every setting (defaults written in), the paper preset's
+    (None: the env has none) and the phases it is computed from, so the report compares recorded with recorded."""
+    depends = CURRICULUM_DEPENDS if preset.curriculum_of(env) is not None else DEPENDS
+    return {"full_config": preset.full_phase_config(env, phase), "paper_config": paper_phase_config(env, phase), "depends": list(depends[phase])}
 
 
 def adaptive(preset: Preset, envs: list[str]) -> bool:
@@ -109,13 +117,21 @@ def check_configs(manifest: Manifest, preset: Preset, envs: list[str]) -> None:
 
 
 def run_phase(
-    manifest: Manifest, key: str, config: dict, work: Callable[[], dict], echo: Callable[[str], None], tolerate: bool = False, skip: bool = True
+    manifest: Manifest,
+    key: str,
+    config: dict,
+    work: Callable[[], dict],
+    echo: Callable[[str], None],
+    tolerate: bool = False,
+    skip: bool = True,
+    about: dict | None = None,
 ) -> dict:
-    """Run one phase unless it is done with ``config``; record it; print one status line."""
+    """Run one phase unless it is done with ``config``; record it (with ``about``: ``settings_record``); print one status line."""
     if skip and manifest.is_done(key, config):
         echo(f"{key}: done already, skipped ({manifest.phase(key).get('wall_s', 0):.1f} s when it ran)")
+        manifest.annotate(key, about)
         return manifest.phase(key)
-    manifest.start(key, config)
+    manifest.start(key, config, about)
     echo(f"{key}: running")
     start = time.perf_counter()
     try:

@@ -336,6 +336,20 @@ class Preset:
             raise WorldagentError(f"unknown phase {phase!r}; use one of: {', '.join(PHASES)}.")
         return {"seed": self.seed, **table[phase]}
 
+    def full_phase_config(self, env: str, phase: str) -> dict:
+        """``phase_config`` as JSON holds it, with what it leaves out when it is the default (so that earlier runs
+        still match) written in: every env option (``spec.check_options``), the env's default repair, the
+        influence search's default and no confirmation of the influence selection. What the report compares."""
+        spec, filled = registry.get(env), self.phase_config(env, phase)
+        if phase == "agent":
+            filled["options"] = spec.check_options(filled.get("options") or {})
+        if phase == "generator":
+            filled.setdefault("repair", spec.default_repair)
+        if phase == "influence":
+            filled.setdefault("search", EnvBudgets.influence_search)
+            filled.setdefault("confirm", 0)
+        return json.loads(json.dumps(filled, default=list))
+
     def selection(self, env: str) -> str:
         """The influencing experiment's selection of ``env`` (``spec.selection`` unless the budgets override it)."""
         return self.budgets(env).influence_selection or registry.get(env).selection
@@ -403,6 +417,13 @@ def env_budgets(preset_name: str) -> dict[str, EnvBudgets]:
             except TypeError as error:
                 raise WorldagentError(f"{env}'s preset {preset_name!r} is malformed ({error}); see reproduce.presets.EnvBudgets.") from None
     return found
+
+
+def paper_phase_config(env: str, phase: str) -> dict | None:
+    """The ``paper`` preset's ``full_phase_config`` of ``phase`` for ``env``; None: the env has no paper preset."""
+    if "paper" not in registry.get(env).presets:
+        return None
+    return get_preset("paper").full_phase_config(env, phase)
 
 
 def get_preset(name: str) -> Preset:

@@ -80,23 +80,12 @@ def quality_figures(directory: Path, samples: int, seed: int) -> dict:
     import jax
 
     from worldagent.worlds.generator import load_generator
-    from worldagent.worlds.quality import diagnose, figures, reconstruction
-    from worldagent.worlds.vae import split_holdout
+    from worldagent.worlds.quality import assess
 
     if samples < 1:
         raise WorldagentError(f"--samples {samples}; draw at least 1 latent.")
     generator, vae, data = load_generator(directory)
-    train, held = split_holdout(len(data), vae.config.holdout, vae.config.seed)
-    recon = reconstruction(generator, data, held, train)
-    measured = figures(generator, data, samples, jax.random.key(seed))
-    return {
-        "env": data.env,
-        "worlds": len(data),
-        "reconstruction": recon,
-        data.env: measured,
-        "training": {"epochs": len(vae.history), "kept_epoch": vae.kept_epoch or len(vae.history), "kept": vae.kept, "final": vae.history[-1]},
-        "warnings": diagnose(recon, measured, len(data), vae.kept["nll"]),
-    }
+    return assess(generator, vae, data, samples, jax.random.key(seed))
 
 
 def key_figures(quality: dict) -> str:

@@ -149,8 +149,8 @@ def generator_phase(ctx: EnvContext) -> dict:
     from worldagent.worlds.dataset import WorldDataset
     from worldagent.worlds.generator import build_generator, save_generator
     from worldagent.worlds.pictures import traversal_sheet
-    from worldagent.worlds.quality import diagnose, figures, gate, gate_kinds, reconstruction
-    from worldagent.worlds.vae import split_holdout, train_vae
+    from worldagent.worlds.quality import assess, gate_kinds
+    from worldagent.worlds.vae import train_vae
 
     layout = ctx.layout
     data = WorldDataset.load(layout.dataset_path, env=ctx.env)
@@ -158,21 +158,8 @@ def generator_phase(ctx: EnvContext) -> dict:
     vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=layout.generator_dir)
     generator = build_generator(vae, data, repair_name=ctx.preset.repair)
     save_generator(layout.generator_dir, vae, layout.dataset_path, generator)
-    train, held = split_holdout(len(data), config.holdout, config.seed)
-    recon = reconstruction(generator, data, held, train)
-    measured = figures(generator, data, QUALITY_SAMPLES, jax.random.key(ctx.seed))
-    warnings = diagnose(recon, measured, len(data), vae.kept["nll"])  # collapsed, inert or narrow: the report shows them
-    verdict = gate(warnings, ctx.preset.accept_generator)
-    kept_epoch = vae.kept_epoch or len(vae.history)
-    quality = {
-        "env": ctx.env,
-        "worlds": len(data),
-        "reconstruction": recon,
-        ctx.env: measured,
-        "training": {"epochs": len(vae.history), "kept_epoch": kept_epoch, "kept": vae.kept, "final": vae.history[-1], "history": vae.history},
-        "warnings": warnings,
-        "gate": verdict,
-    }
+    quality = assess(generator, vae, data, QUALITY_SAMPLES, jax.random.key(ctx.seed), ctx.preset.accept_generator)
+    warnings, verdict, kept_epoch = quality["warnings"], quality["gate"], quality["training"]["kept_epoch"]
     quality_path = write_text(layout.quality_path, json.dumps(quality, indent=1))
     if verdict["verdict"] == "rejected":
         raise WorldagentError(
@@ -180,7 +167,7 @@ def generator_phase(ctx: EnvContext) -> dict:
             "--accept-generator to use it anyway (recorded in the manifest and the report), or with another --repair or a larger --preset."
         )
     traversals = traversal_sheet(generator, layout.figure("generator_traversals"))
-    accuracy = recon["vae"]["accuracy"]
+    accuracy = quality["reconstruction"]["vae"]["accuracy"]
     flagged = f"; gate {verdict['verdict']} ({gate_kinds(warnings)}: {verdict['waiver']})" if warnings else "; gate passed"
     return {
         "generator": layout.rel(layout.generator_dir),

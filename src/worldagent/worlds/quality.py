@@ -22,7 +22,8 @@
   dataset), shifted or uncovered (it reaches under half of what the env's generator makes) — such
   a generator gives search nothing to find, whatever its loss says.
 - ``gate``: the verdict on those warnings: passed (none), rejected (any), or waived (rejected, but
-  used for a recorded reason).
+  used for a recorded reason);
+- ``assess``: all of the above for a trained generator, as ``quality.json`` holds it.
 
 Worlds are compared by their cells (``EnvSpec.cells``), so nothing here depends on the
 environment: racing's nearest-track repair and harvest's apple-count repair get the same figures.
@@ -42,7 +43,7 @@ from worldagent.errors import WorldagentError
 from worldagent.worlds.coverage import COVERAGE_WORLDS, NEIGHBOURS, coverage
 from worldagent.worlds.dataset import WorldDataset
 from worldagent.worlds.generator import Generator
-from worldagent.worlds.vae import VAE
+from worldagent.worlds.vae import VAE, split_holdout
 
 BATCH = 1000  # worlds per jitted call
 HAMMING_PAIRS = 10_000  # sample pairs for the mean Hamming distance
@@ -488,3 +489,28 @@ def gate(warnings: list[str], waiver: str | None = None) -> dict:
 def gate_kinds(warnings: list[str]) -> str:
     """The kinds of ``warnings`` (their text before the first colon: collapsed, overfit, ...), each once, comma-separated."""
     return ", ".join(dict.fromkeys(line.split(":")[0] for line in warnings))
+
+
+def assess(generator: Generator, vae: VAE, dataset: WorldDataset, samples: int, key: jax.Array, waiver: str | None = None) -> dict:
+    """``quality.json``: a trained generator's reconstruction on its held-out worlds, ``figures`` over ``samples``
+    prior draws, its training record, ``diagnose``'s warnings and the ``gate``'s verdict (under ``waiver``)."""
+    train, held = split_holdout(len(dataset), vae.config.holdout, vae.config.seed)
+    recon = reconstruction(generator, dataset, held, train)
+    measured = figures(generator, dataset, samples, key)
+    warnings = diagnose(recon, measured, len(dataset), vae.kept["nll"])
+    history = vae.history
+    return {
+        "env": dataset.env,
+        "worlds": len(dataset),
+        "reconstruction": recon,
+        dataset.env: measured,
+        "training": {
+            "epochs": len(history),
+            "kept_epoch": vae.kept_epoch or len(history),
+            "kept": vae.kept,
+            "final": history[-1],
+            "history": history,
+        },
+        "warnings": warnings,
+        "gate": gate(warnings, waiver),
+    }

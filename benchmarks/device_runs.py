@@ -126,10 +126,13 @@ def many_runs(part) -> None:
 
 
 def quick(part) -> None:
-    """``reproduce --preset quick`` end to end when the time left allows (``--smoke``: tiny, racing), else
-    its slowest phase that stands alone: harvest's agent (DQN at the preset's budget, after its dataset)."""
-    if part.smoke or part.left() >= QUICK_ALL_S:
-        reproduce(part, "all" if not part.smoke else "racing")
+    """``reproduce --preset quick`` end to end when the time left allows, else its slowest phase that stands
+    alone: harvest's agent (DQN at the preset's budget, after its dataset). ``--smoke``: the tiny preset's
+    racing dataset phase, to completion (all of ``reproduce`` would take minutes, and a cut run checks nothing)."""
+    if part.smoke:
+        slowest_phase(part, "racing", ("dataset",))
+    elif part.left() >= QUICK_ALL_S:
+        reproduce(part, "all")
     else:
         slowest_phase(part, "harvest", ("dataset", "agent"))
 
@@ -163,7 +166,8 @@ def slowest_phase(part, env: str, phases: tuple[str, ...]) -> None:
     from worldagent.reproduce.phases import PHASE_FUNCTIONS, EnvContext
     from worldagent.reproduce.presets import get_preset
 
-    part.put("command", f"reproduce --preset {part.sizes['preset']}: {env}'s {' and '.join(phases)} phases only (too little time for all)")
+    why = "smoke: tiny sizes" if part.smoke else "too little time for all"
+    part.put("command", f"reproduce --preset {part.sizes['preset']}: {env}'s {' and '.join(phases)} phases only ({why})")
     ctx, times = EnvContext(part.work / "reproduce", env, get_preset(part.sizes["preset"]), progress=False), {}
     for phase in phases:
         times[f"{env}/{phase}"] = {"status": "running"}  # what a cut section's record shows

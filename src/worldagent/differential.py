@@ -482,6 +482,29 @@ def confirmed_search(
 # -- the whole comparison -------------------------------------------------------------------------
 
 
+def world_noise(evaluations: list[Evaluation], metric: str, selection: Any) -> dict:
+    """How much of each agent's ``metric`` (and of B's failure event) the world explains on a world set
+    (``analysis.noise``: the share of one episode's variance between worlds), from its own episodes.
+
+    Returns:
+        {"repeats", "metric", "a", "b": ``WorldShare.as_dict()`` of A's and B's metric (None when not computed),
+        "failure_b": that of B's failure event (None)}; {} with one episode per world (nothing to split).
+    """
+    from worldagent.analysis.noise import noise_summary
+
+    b = noise_summary(evaluations, [metric], selection)
+    if not b:
+        return {}
+    a = noise_summary(evaluations, [BASELINE + metric])
+    return {
+        "repeats": b["repeats"],
+        "metric": metric,
+        "a": a.get("metrics", {}).get(BASELINE + metric),
+        "b": b["metrics"].get(metric),
+        "failure_b": b.get("failure", {}).get("share"),
+    }
+
+
 def diff(
     store: RunStore,
     setup: DiffSetup,
@@ -516,7 +539,8 @@ def diff(
             reported worlds replayed for A and B on the same keys (``confirmed_regressed``, ``confirmed_search``).
 
     Returns:
-        {"env", "agents" {"a", "b"}, "seed", "repeats", "source", "worlds": ``summarise`` with "confirmed" or None,
+        {"env", "agents" {"a", "b"}, "seed", "repeats", "source", "worlds": ``summarise`` with "confirmed" and "noise"
+        (``world_noise``) or None,
         "search": ``search_summary`` with "campaign" and "confirmed" or None, "episodes": all the comparison spent,
         "confirmation_episodes": those of the confirmations, "gate": its check or None}. The gate reads the paired
         statistics of the world set as they are (unbiased: every sampled world counts) and the search's confirmed figures.
@@ -537,6 +561,7 @@ def diff(
         else:
             found, result["source"] = prior_set(store, setup, int(worlds), seed=seed, progress=progress), {"prior": int(worlds)}
         result["worlds"] = {"campaign": found[0].campaign, **summarise(found, spec, selection, metric, store=store, seed=seed)}
+        result["worlds"]["noise"] = world_noise(found, metric, selection)
         shown = list(dict.fromkeys((metric, *selection.metrics)))
         name = f"diff:{found[0].campaign}"
         result["worlds"]["confirmed"] = confirmed_regressed(

@@ -212,12 +212,92 @@ def paired_cvar(a, b, alpha: float = CVAR_ALPHA, confidence: float = 0.95, resam
 
 
 def tail_warning(tail: int, alpha: float) -> str | None:
-    """One line when an α-CVaR interval rests on fewer than ``MIN_TAIL_WORLDS`` tail worlds, naming the fix; else None."""
+    """One line when an α-CVaR interval rests on fewer than ``MIN_TAIL_WORLDS`` tail worlds, naming the fix; else None.
+
+    The line holds no env's figures (it is printed for every env): it gives the chance, exact for any env, that the
+    worlds compared hold none of a failure on 1% of worlds, which no interval over them can then see."""
     if tail >= MIN_TAIL_WORLDS:
         return None
+    worlds = max(1, round(tail / alpha))
     return (
         f"the α-CVaR interval rests on {tail} tail worlds (< {MIN_TAIL_WORLDS}): a failure too rare to reach the tail may be missing from it "
-        f"(racing: 58% coverage at 10, 92% at 40); read it loosely, or pass --worlds {math.ceil(MIN_TAIL_WORLDS / alpha)} or more."
+        f"({worlds} worlds hold none of a failure on 1% of worlds {miss_chance(0.01, worlds):.0%} of the time); read it loosely, "
+        f"or pass --worlds {math.ceil(MIN_TAIL_WORLDS / alpha)} or more."
+    )
+
+
+def miss_chance(share: float, worlds: int) -> float:
+    """The chance that ``worlds`` independent worlds hold none of a failure on ``share`` of worlds: (1 − share)^worlds."""
+    return (1.0 - share) ** worlds
+
+
+def worlds_to_catch(share: float, power: float = 0.95, at_least: int = 1) -> int:
+    """How many random worlds hold at least ``at_least`` of a blind spot on ``share`` of worlds with probability ``power``.
+
+    For one world it is ⌈ln(1 − power) / ln(1 − share)⌉; for more, the smallest n with P(Binomial(n, share) ≥ at_least)
+    ≥ power. A gate that fires on ``at_least`` regressed worlds needs this many worlds to catch the blind spot that often,
+    assuming every sampled world of the blind spot counts as regressed (B fails it, A passes it).
+    """
+    from scipy.stats import binom
+
+    if not 0 < share < 1 or not 0 < power < 1 or at_least < 1:
+        raise ValueError(f"share={share}, power={power}, at_least={at_least}; pass a share and a power in (0, 1) and at_least >= 1.")
+    low = math.ceil(math.log(1 - power) / math.log(1 - share) - 1e-9)  # enough for one; more need more worlds
+    if at_least == 1:
+        return low
+    caught = lambda n: binom.sf(at_least - 1, n, share) >= power  # noqa: E731
+    high = low
+    while not caught(high):
+        high *= 2
+    while low < high:  # the smallest n that catches it (P grows with n)
+        middle = (low + high) // 2
+        low, high = (middle + 1, high) if not caught(middle) else (low, middle)
+    return high
+
+
+def regressed_to_reject(worlds: int, confidence: float = 0.95) -> int:
+    """The fewest regressed worlds (none improved) for which Tango's interval of p_B − p_A excludes 0
+    (the gate ``p_failure_increase_low > 0``): 4 at 95%, whatever the number of ``worlds``."""
+    return next(r for r in range(1, worlds + 1) if tango_interval(r, 0, worlds, confidence)[0] > 0)
+
+
+def blind_spot_table(shares=(0.01, 0.003, 0.001), power: float = 0.95, at=(500, 1000)) -> list[dict]:
+    """Per blind-spot share, the worlds a gate needs to catch it with probability ``power``: one regressed world
+    (``regressed > 0``), enough for Tango's interval to exclude 0 (``p_failure_increase_low > 0``), and six
+    (``regressed > 5``); and the chance each gate catches it on each number of worlds in ``at``."""
+    from scipy.stats import binom
+
+    needed = {"regressed > 0": 1, "p_failure_increase_low > 0": regressed_to_reject(max(at)), "regressed > 5": 6}
+    return [
+        {
+            "share": share,
+            "worlds_needed": {gate: worlds_to_catch(share, power, count) for gate, count in needed.items()},
+            "caught": {worlds: {gate: float(binom.sf(count - 1, worlds, share)) for gate, count in needed.items()} for worlds in at},
+        }
+        for share in shares
+    ]
+
+
+def interval_test_disagreement(difference: dict, discordant: int, confidence: float = 0.95) -> str | None:
+    """One line when Tango's interval of p_B − p_A and the exact McNemar test disagree on whether it is 0; else None.
+
+    Tango's score interval is a large-sample one; the exact test is exact but conservative. With few discordant worlds
+    (those where only one agent fails) the interval can exclude 0 while p > 1 − confidence (4 worlds regressed and none
+    improved: the interval excludes 0, p = 0.125), or, more rarely, the other way round.
+
+    Args:
+        difference: ``paired_failures``'s "difference" ({"low", "high", "p_value"}).
+        discordant: worlds where exactly one agent fails (regressed + improved).
+    """
+    excludes = difference["low"] > 0 or difference["high"] < 0
+    rejects = difference["p_value"] < 1 - confidence
+    if excludes == rejects:
+        return None
+    said = "excludes 0 but the exact McNemar test does not reject" if excludes else "holds 0 but the exact McNemar test rejects"
+    return (
+        f"Tango's interval {said} (p = {difference['p_value']:.3g}): they disagree when few worlds are discordant ({discordant} here), "
+        "where the interval's large-sample score is approximate and the exact test conservative; read the change as borderline, "
+        "or compare on more worlds."
     )
 
 

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import math
 
-from worldagent.analysis.diff import tail_warning
+from worldagent.analysis.diff import interval_test_disagreement, tail_warning
+from worldagent.analysis.noise import repeats_for
+from worldagent.reports.noise import LUCK_SHARE, RELIABLE
+
+CONSOLE_ROWS = 5  # regressed worlds the console lists (diff.md: the summary's limit)
 
 
 def number(value, digits: int = 4) -> str:
@@ -16,6 +20,16 @@ def number(value, digits: int = 4) -> str:
 
 def interval(row: dict, low: str = "low", high: str = "high") -> str:
     return f"[{number(row[low])}, {number(row[high])}]"
+
+
+def place(row: dict) -> str:
+    """ "diff-prior-s0 2/18": where a world is stored (campaign, generation/slot): a slot alone names no world."""
+    return f"{row['campaign']} {row['generation']}/{row['slot']}"
+
+
+def cut_note(shown: int, total: int) -> str:
+    """ " (20 of 25 shown)" when a list leaves some out, else ""."""
+    return f" ({shown} of {total} shown)" if total > shown else ""
 
 
 def agent_name(record: dict) -> str:
@@ -37,6 +51,35 @@ def failure_lines(worlds: dict) -> list[str]:
         f"B − A {number(difference['value'])} {interval(difference)} (Tango's paired score interval; exact McNemar p = {number(difference['p_value'], 3)}).",
         f"{failure['regressed']} worlds regressed (fail under B, pass under A){distinct_note(failure)}, {failure['improved']} improved, "
         f"of {failure['worlds']} (the sampled worlds' own episodes).",
+    ] + disagreement_lines(failure)
+
+
+def disagreement_lines(failure: dict) -> list[str]:
+    """The line saying why Tango's interval and the exact test disagree, where they do (``analysis.diff``)."""
+    said = interval_test_disagreement(failure["difference"], failure["regressed"] + failure["improved"])
+    return [f"Note: {said}"] if said else []
+
+
+def noise_lines(worlds: dict) -> list[str]:
+    """A warning when this env's outcome on these worlds is mostly dice (the world's share below ``LUCK_SHARE``,
+    ``differential.world_noise``): a world's B − A is then mostly luck. [] when not measured (one episode per world)."""
+    noise = worlds.get("noise") or {}
+    named = {f"A's {noise.get('metric')}": noise.get("a"), f"B's {noise.get('metric')}": noise.get("b")}
+    named[f"B's failure `{worlds['failure']['event']}`"] = noise.get("failure_b")
+    noisy = {what: share for what, share in named.items() if share and share.get("icc") is not None and share["icc"] < LUCK_SHARE}
+    if not noisy:
+        return []
+    said = "; ".join(f"{what} {number(s['icc'], 2)} [{number(s['low'], 2)}, {number(s['high'], 2)}]" for what, s in noisy.items())
+    more = [n for n in (repeats_for(s["icc"], RELIABLE) for s in noisy.values()) if n]
+    fix = (
+        f"pass --repeats {max(more)} (a world's score of reliability {RELIABLE})"
+        if more and max(more) > noise["repeats"]
+        else "compare on more worlds"
+    )
+    return [
+        f"Warning: on these worlds the outcome is mostly dice (the world's share of one episode's variance, below {LUCK_SHARE}: {said}; "
+        f"{noise['repeats']} episodes per world): a world's B − A, and whether it regressed, is mostly luck; read the regressed "
+        f"worlds as candidates (the confirmation replays them on fresh episodes), or {fix}."
     ]
 
 
@@ -55,7 +98,8 @@ def cvar_line(worlds: dict) -> str:
     )
 
 
-def regressed_table(rows: list[dict], title: str) -> list[str]:
+def regressed_table(rows: list[dict], title: str, total: int) -> list[str]:
+    """The regressed worlds listed (at most the summary's limit of ``total``), each with its generation and slot."""
     if not rows:
         return []
     shown = list(rows[0]["a"])
@@ -63,10 +107,10 @@ def regressed_table(rows: list[dict], title: str) -> list[str]:
     head.append("|---" * (len(shown) + 3) + "|")
     for row in rows:
         near = row["nearest_passing"]
-        where = "none" if near is None else f"{near['campaign']} {near['generation']}/{near['slot']} (distance {number(near['distance'], 3)})"
+        where = "none" if near is None else f"{place(near)} (distance {number(near['distance'], 3)})"
         changes = " | ".join(f"{number(row['a'][m])} → {number(row['b'][m])}" for m in shown)
-        head.append(f"| {row['campaign']} {row['generation']}/{row['slot']} | {number(row['log_prior'])} | {changes} | {where} |")
-    return [f"**{title}**", "", *head]
+        head.append(f"| {place(row)} | {number(row['log_prior'])} | {changes} | {where} |")
+    return [f"**{title}**{cut_note(len(rows), total)}", "", *head]
 
 
 def search_lines(search: dict) -> list[str]:
@@ -81,7 +125,7 @@ def search_lines(search: dict) -> list[str]:
     lines = [
         f"Differential search ({search['search']}, campaign `{search['campaign']}`): {search['evaluations']} worlds, {search['episodes']} episodes, "
         f"{direction} {search['metric']}(B) − {search['metric']}(A).",
-        f"Most extreme world: {best['campaign']} {best['generation']}/{best['slot']}, {search['metric']} A {number(best['a'])} → B {number(best['b'])} "
+        f"Most extreme world: {place(best)}, {search['metric']} A {number(best['a'])} → B {number(best['b'])} "
         f"(B − A {number(best['score'])}, the search's figure); {counted}, {found}.",
     ]
     confirmed = search.get("confirmed")
@@ -127,9 +171,7 @@ def confirmed_table(confirmed: dict | None, title: str) -> list[str]:
         cells = " | ".join(f"{side_text(row['a'], m)} | {side_text(row['b'], m)}" for m in shown)
         difference = row["failure_rate_difference"]
         verdict = "confirmed" if row["confirmed_regressed"] else "not confirmed"
-        lines.append(
-            f"| {row['campaign']} {row['generation']}/{row['slot']} | {cells} | {number(difference['mean'])} {interval(difference)} | {verdict} |"
-        )
+        lines.append(f"| {place(row)} | {cells} | {number(difference['mean'])} {interval(difference)} | {verdict} |")
     return lines
 
 
@@ -154,14 +196,16 @@ def markdown(result: dict) -> str:
     worlds = result.get("worlds")
     if worlds:
         lines += [f"On {worlds['worlds']} worlds ({source_text(result['source'])}), campaign `{worlds['campaign']}`:", "", *metric_table(worlds), ""]
-        lines += [*failure_lines(worlds), "", cvar_line(worlds), ""]
-        lines += [*regressed_table(worlds["regressed_worlds"], "Regressed worlds, likeliest under the prior first"), ""]
+        lines += [*failure_lines(worlds), "", cvar_line(worlds), "", *noise_lines(worlds), ""]
+        title = "Regressed worlds, likeliest under the prior first"
+        lines += [*regressed_table(worlds["regressed_worlds"], title, worlds["failure"]["regressed"]), ""]
         if worlds.get("confirmed"):
             lines += [f"Confirmed: {confirmed_count(worlds['confirmed'])}", ""]
             lines += [*confirmed_table(worlds["confirmed"], "Regressed worlds confirmed for A and B"), ""]
     if result.get("search"):
         lines += [*search_lines(result["search"]), ""]
-        lines += [*regressed_table(result["search"]["regressed_worlds"], "Regressed worlds the search found (one row per distinct world)"), ""]
+        title = "Regressed worlds the search found (one row per distinct world)"
+        lines += [*regressed_table(result["search"]["regressed_worlds"], title, result["search"]["regressed"]), ""]
         lines += [*confirmed_table(result["search"].get("confirmed"), "The search's regressed worlds confirmed for A and B"), ""]
     lines += gate_lines(result.get("gate"))
     return "\n".join(lines).rstrip() + "\n"
@@ -188,13 +232,16 @@ def console_lines(result: dict) -> list[str]:
             f"{worlds['worlds']} worlds x {worlds['repeats']} episodes x 2 agents ({worlds['episodes']:,} episodes): "
             f"{main} A {number(row['a'])}, B {number(row['b'])}, B − A {number(row['difference'])} {interval(row)}"
         )
-        lines += failure_lines(worlds) + [cvar_line(worlds)]
+        lines += failure_lines(worlds) + [cvar_line(worlds)] + noise_lines(worlds)
         if worlds.get("confirmed"):
             lines.append(f"confirmed on {worlds['confirmed']['repeats']} fresh episodes per agent: {confirmed_count(worlds['confirmed'])}")
-        for row in worlds["regressed_worlds"][:5]:
+        listed, total = worlds["regressed_worlds"], worlds["failure"]["regressed"]
+        for row in listed[:CONSOLE_ROWS]:
             near = row["nearest_passing"]
-            where = "" if near is None else f"; nearest where B passes: slot {near['slot']} (distance {number(near['distance'], 3)})"
-            lines.append(f"  regressed: {row['campaign']} slot {row['slot']}, log prior {number(row['log_prior'])}{where}")
+            where = "" if near is None else f"; nearest where B passes: {place(near)} (distance {number(near['distance'], 3)})"
+            lines.append(f"  regressed: {place(row)}, log prior {number(row['log_prior'])}{where}")
+        if total > min(len(listed), CONSOLE_ROWS):
+            lines.append(f"  ({min(len(listed), CONSOLE_ROWS)} of {total} regressed worlds shown; diff.md lists {len(listed)})")
     if result.get("search"):
         lines += search_lines(result["search"])
     for row in (result.get("gate") or {}).get("conditions", []):

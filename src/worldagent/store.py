@@ -26,7 +26,9 @@ pickle), ``episodes`` JSON: a list, one dict of metrics per episode.
 from __future__ import annotations
 
 import csv
+import functools
 import hashlib
+import inspect
 import io
 import json
 import os
@@ -167,6 +169,71 @@ def _use_wal(db: sqlite3.Connection, patience: float = 30.0) -> None:
             time.sleep(0.01)
 
 
+def sqlite_kind(error: sqlite3.Error) -> str:
+    """What went wrong, from SQLite's own error code (its message where Python gives none): "locked",
+    "full", "read-only", "damaged", "io", or "" (anything else: a bug, whose traceback is wanted)."""
+    name = getattr(error, "sqlite_errorname", "") or ""
+    text = str(error).lower()
+    kinds = (
+        ("locked", ("SQLITE_BUSY", "SQLITE_LOCKED"), ("locked", "busy")),
+        ("full", ("SQLITE_FULL",), ("disk is full", "database or disk is full")),
+        ("read-only", ("SQLITE_READONLY", "SQLITE_CANTOPEN", "SQLITE_PERM", "SQLITE_AUTH"), ("readonly", "read-only", "unable to open")),
+        ("damaged", ("SQLITE_CORRUPT", "SQLITE_NOTADB"), ("malformed", "not a database", "corrupt")),
+        ("io", ("SQLITE_IOERR",), ("disk i/o error",)),
+    )
+    for kind, codes, words in kinds:
+        if name.startswith(codes) or any(word in text for word in words):
+            return kind
+    return ""
+
+
+def sqlite_failure(error: sqlite3.Error, path: Path) -> WorldagentError | None:
+    """The one line naming the fix for a SQLite failure on the store at ``path`` (``sqlite_kind``), or None for a bug."""
+    fixes = {
+        "locked": "stayed locked by another process writing to it (another worldagent command on the same --out?); "
+        "wait for it to finish, or pass another --out",
+        "full": "cannot be written: the disk is full; free some space (or pass an --out on another disk) and run the same command "
+        "again (every evaluation committed before is kept, and the rerun resumes)",
+        "read-only": f"cannot be written ({error}): SQLite writes the store and files beside it in {path.parent}; make both writable, "
+        "or copy the run directory somewhere writable and pass the copy",
+        "damaged": f"is damaged ({error}); restore it from a copy or choose another --out",
+        "io": f"could not be read or written ({error}: the disk or its mount failed); check the disk, then run the same command again",
+    }
+    kind = sqlite_kind(error)
+    return WorldagentError(f"the run store {path} {fixes[kind]}.") if kind else None
+
+
+def _one_line_sqlite_errors(cls):
+    """Class decorator: a SQLite failure in any public method of ``cls`` (a generator's too) is raised as ``sqlite_failure``'s
+    ``WorldagentError``: the store is the one boundary where SQLite's errors become one line naming the fix."""
+
+    def guarded(method):
+        if inspect.isgeneratorfunction(method):
+
+            @functools.wraps(method)
+            def generator(self, *args, **kwargs):
+                try:
+                    yield from method(self, *args, **kwargs)
+                except sqlite3.Error as error:
+                    raise (sqlite_failure(error, self.path) or error) from None
+
+            return generator
+
+        @functools.wraps(method)
+        def wrapper(self, *args, **kwargs):
+            try:
+                return method(self, *args, **kwargs)
+            except sqlite3.Error as error:
+                raise (sqlite_failure(error, self.path) or error) from None
+
+        return wrapper
+
+    for name, method in list(vars(cls).items()):
+        if inspect.isfunction(method) and not name.startswith("_"):
+            setattr(cls, name, guarded(method))
+    return cls
+
+
 def agent_identity(record: dict) -> list:
     """What makes two agent records (``agents.policy.agent_record``) the same agent (DESIGN.md "Identity"): the
     kind and the hash of its files, not where they are now; a callable's function name beside its module's
@@ -194,8 +261,10 @@ def _resumable(have: dict, wanted: dict) -> tuple[dict, dict]:
     return {**have, "agent": same(have.get("agent"))}, {**wanted, "agent": same(wanted.get("agent"))}
 
 
+@_one_line_sqlite_errors
 class RunStore:
-    """A SQLite run store (see the module docstring). Use as a context manager or ``close()``."""
+    """A SQLite run store (see the module docstring). Use as a context manager or ``close()``. Every SQLite failure
+    (a locked store, a full disk, a read-only or damaged file) is a one-line ``WorldagentError`` naming the fix."""
 
     def __init__(self, path: Path | str, create: bool = True):
         path = Path(path)
@@ -215,8 +284,9 @@ class RunStore:
                 self._create()
             self._check()
         except sqlite3.DatabaseError as error:
-            if "locked" in str(error):  # another process holds the store: not a broken file
-                raise
+            kind = sqlite_kind(error)
+            if kind in ("locked", "full", "io"):  # the machine, not the file: said as any store method says it
+                raise sqlite_failure(error, path) from None
             if not (can_create_files_in(path.parent) and os.access(path, os.W_OK)):  # SQLite writes the store and its -wal, -shm beside it
                 raise WorldagentError(
                     f"cannot open {path} ({error}): SQLite writes the store and files beside it in {path.parent}; make both writable or copy the run directory."
@@ -251,7 +321,12 @@ class RunStore:
         row = self.db.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
         if row is None or int(row[0]) != SCHEMA_VERSION:
             found = row[0] if row else "none"
-            raise WorldagentError(f"{self.path} has store schema version {found}; this worldagent reads version {SCHEMA_VERSION}.")
+            fix = (
+                "it was written by a newer worldagent: upgrade worldagent (pip install -U worldagent), or choose another --out"
+                if row is not None and int(row[0]) > SCHEMA_VERSION
+                else "choose another --out (or rerun with the worldagent that wrote it)"
+            )
+            raise WorldagentError(f"{self.path} has store schema version {found}; this worldagent reads version {SCHEMA_VERSION}: {fix}.")
 
     def check_intact(self) -> None:
         """Refuse, in one line, a store with damaged pages (SQLite's quick check), before a run resumes from it."""
@@ -280,6 +355,11 @@ class RunStore:
             return None
         id_, name, env, objective, maximize, optimiser, budget, seed, config, _ = row
         return Campaign(id_, name, env, objective, bool(maximize), optimiser, budget, seed, json.loads(config))
+
+    def size(self) -> tuple[int, int]:
+        """(campaigns, evaluations) the store holds, counted without reading them."""
+        campaigns = self.db.execute("SELECT COUNT(*) FROM campaigns").fetchone()[0]
+        return int(campaigns), int(self.db.execute("SELECT COUNT(*) FROM evaluations").fetchone()[0])
 
     def campaigns(self) -> list[Campaign]:
         return [self.campaign(row[0]) for row in self.db.execute("SELECT name FROM campaigns ORDER BY id")]

@@ -1,5 +1,7 @@
 """worldagent: optimise worlds to evaluate and influence reinforcement-learning agents."""
 
+# The one version source: pyproject.toml reads it ([tool.setuptools.dynamic]), `worldagent --version`
+# prints it, stores and manifests record it; CHANGELOG.md says what each version changed.
 __version__ = "0.1.0"
 
 

@@ -10,15 +10,18 @@ from __future__ import annotations
 import typer
 
 from worldagent.commands import register_all
+from worldagent.commands.interrupted import InterruptedGroup
 
 app = typer.Typer(
     help="Find the worlds in which trained RL agents fail or shine, and reshape what they train on.",
     no_args_is_help=True,
     add_completion=False,
+    cls=InterruptedGroup,  # Ctrl-C in any command: one line on what its run directory kept and how to resume
 )
 
 
 def _print_version(value: bool) -> None:
+    """``--version``: print ``worldagent.__version__`` (the one version source, which the wheel's metadata reads) and exit."""
     if value:
         from worldagent import __version__
 

@@ -1,18 +1,20 @@
 """How much of the env's own generator does G(z) cover? Decodes against fresh procedural worlds (issue 48).
 
-    python benchmarks/generator_coverage.py --generator runs/quick/racing/generator [--generator ...] [--decodes 1000]
+    python benchmarks/generator_coverage.py --generator runs/quick/racing/generator [--generator ...] [--decodes 1000] [--update]
 
 Per generator directory: ``--decodes`` draws z ~ N(0, I) (seed 0) decoded and repaired, against as many
 fresh worlds of the env's generator at seeds past the dataset's largest (``worlds.coverage.coverage``):
 precision and recall (Kynkäänniemi et al. 2019), density and coverage (Naeem et al. 2020), k = 5, with
 the fresh-against-fresh floor at a second, disjoint seed range; each descriptor's quantiles under G(z),
 fresh and dataset; where the env declares them, its generator parameters' spread. Also the wall time of
-the coverage figures alone. Recorded with ``machine.record("generator-coverage", ...)``.
+the coverage figures alone. Recorded with ``machine.record("generator-coverage", ...)``; ``--update`` keeps
+the recorded generators not given (a row is replaced where its ``--generator`` path is given again).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -21,7 +23,7 @@ import jax
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import QUICK_RUN, record, require_input  # noqa: E402
+from machine import QUICK_RUN, RESULTS, describe_machine, record, require_input  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.worlds.coverage import coverage  # noqa: E402
 from worldagent.worlds.generator import load_generator  # noqa: E402
@@ -39,10 +41,24 @@ def measure(directory: Path, decodes: int) -> dict:
     return {"env": generator.env, "repair": generator.repair_name, "dataset_worlds": len(data), "seconds": time.perf_counter() - start, **figures}
 
 
+def merged(rows: list[dict], decodes: int) -> list[dict]:
+    """The recorded rows with those of the same ``generator`` replaced by ``rows``, new ones appended (``--update``)."""
+    path = RESULTS / f"generator-coverage-{describe_machine()['backend']}.json"
+    if not path.exists():
+        return rows
+    recorded = json.loads(path.read_text())
+    if recorded["decodes"] != decodes:
+        raise SystemExit(f"{path} was recorded with --decodes {recorded['decodes']}; rerun with it or without --update")
+    fresh = {row["generator"]: row for row in rows}
+    kept = [fresh.pop(row["generator"], row) for row in recorded["generators"]]
+    return kept + list(fresh.values())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--generator", type=Path, action="append", required=True, help="A generator directory (repeatable).")
     parser.add_argument("--decodes", type=int, default=1000)
+    parser.add_argument("--update", action="store_true", help="keep the recorded generators not given here; replace those given")
     args = parser.parse_args()
     rows = []
     for directory in args.generator:
@@ -57,7 +73,7 @@ def main() -> None:
             + (f"; parameter std ratio min {params['min_std_ratio']:.2f} median {params['median_std_ratio']:.2f}" if params else ""),
             flush=True,
         )
-    print(record("generator-coverage", {"decodes": args.decodes, "generators": rows}))
+    print(record("generator-coverage", {"decodes": args.decodes, "generators": merged(rows, args.decodes) if args.update else rows}))
 
 
 if __name__ == "__main__":

@@ -14,7 +14,8 @@ on ``--samples`` latents z ~ N(0, I):
   seeds) maximising it, against the dataset's maximum;
 - decode cost: warm milliseconds per world of one jitted G(z) call of ``--samples`` latents.
 
-Recorded in ``benchmarks/results/open-worlds-<backend>.json`` with the machine; ``--figures DIR``
+``--repair NAME`` (repeatable) measures only those repairs. Recorded in
+``benchmarks/results/<--record, default open-worlds>-<backend>.json`` with the machine; ``--figures DIR``
 also draws, per environment, the first ``FIGURE_WORLDS`` open decodes above their nearest dataset
 worlds (``DIR/open-worlds-<env>.png``, for docs/open-worlds.md).
 """
@@ -164,6 +165,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--push", action="append", default=[], help="ENV=DESCRIPTOR to push past the dataset's maximum (repeatable).")
     parser.add_argument("--figures", type=Path, default=None, help="draw open decodes beside their nearest dataset worlds here")
+    parser.add_argument("--repair", action="append", default=None, help="measure only this repair (repeatable; default: every one the env names)")
+    parser.add_argument("--record", default="open-worlds", help="results file name, before -<backend>.json (another name keeps the full study)")
     args = parser.parse_args()
     pushes: dict[str, list[str]] = {}
     for text in args.push:
@@ -183,7 +186,7 @@ def main() -> None:
             "dataset_descriptors": reference,
             "repairs": {},
         }
-        for name in spec.repair_names:
+        for name in [name for name in spec.repair_names if args.repair is None or name in args.repair]:
             print(f"{env}: {name}", flush=True)
             generator = build_generator(vae, dataset, repair_name=name)
             entry["repairs"][name] = measure(generator, dataset, spec, args.samples, pushes.get(env, []), args.budget, args.seeds, reference)
@@ -192,7 +195,7 @@ def main() -> None:
             shown = {k: entry["repairs"][name][k] for k in ("validity", "new_share", "distinct", "decode_ms_per_world")}
             print(f"  {shown}", flush=True)
         result["envs"][env] = entry
-    print(f"recorded in {record('open-worlds', result)}")
+    print(f"recorded in {record(args.record, result)}")
 
 
 if __name__ == "__main__":

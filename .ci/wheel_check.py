@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """Install worldagent as its users will and run it there: a file missing from the package fails.
 
-Builds the sdist and, from it, the wheel (``python -m build``), checks that the wheel holds every file
-the checkout tracks under src/worldagent, installs the wheel into a fresh virtualenv in a temporary
-folder outside the checkout, and from there (so ``import worldagent`` cannot come from src/) runs
+Copies the files git sees in the checkout (tracked or not ignored: no stale build output, whose old
+SOURCES.txt setuptools would read and so ship a file pyproject no longer declares), builds the sdist
+and, from it, the wheel there (``python -m build``), checks that the wheel holds every one of those
+files under src/worldagent, installs the wheel into a fresh virtualenv in a temporary folder outside
+the checkout, and from there (so ``import worldagent`` cannot come from src/) runs
 ``worldagent --version`` against the one version source, ``worldagent check racing``,
 ``worldagent reproduce --preset tiny --env racing`` and a request to ``worldagent explore`` over that run
 (its page, the page's scripts and styles, and two API answers). Prints each step's time; exits 1 with
@@ -52,13 +54,25 @@ def source_version(root: Path) -> str:
     raise CheckFailed(f"src/{PACKAGE}/__init__.py sets no __version__: it is the package's one version source.")
 
 
-def tracked_package_files(root: Path) -> set[str]:
-    """Every file git tracks under src/worldagent, as the wheel names it (``worldagent/...``)."""
+def source_files(root: Path) -> list[str]:
+    """The checkout's files as git sees them (tracked, or untracked and not ignored), relative paths that exist."""
+    command = ["git", "-C", str(root), "ls-files", "--cached", "--others", "--exclude-standard"]
     try:
-        out = subprocess.run(["git", "-C", str(root), "ls-files", "--", f"src/{PACKAGE}"], capture_output=True, text=True, check=True).stdout
+        out = subprocess.run(command, capture_output=True, text=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError) as error:
         raise CheckFailed(f"cannot list the checkout's files with git ({error}); run this from a git clone.") from None
-    return {line.removeprefix("src/") for line in out.splitlines() if line}
+    return sorted({line for line in out.splitlines() if line and (root / line).is_file()})
+
+
+def package_files(sources: list[str]) -> set[str]:
+    """The files under src/worldagent among ``sources``, as the wheel names them (``worldagent/...``)."""
+    return {path.removeprefix("src/") for path in sources if path.startswith(f"src/{PACKAGE}/")}
+
+
+def copy_files(root: Path, sources: list[str], dest: Path) -> None:
+    for path in sources:
+        (dest / path).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(root / path, dest / path)
 
 
 def missing_from_wheel(wheel: Path, expected: set[str]) -> list[str]:
@@ -71,7 +85,7 @@ def missing_message(missing: list[str]) -> str:
     """One message naming what the wheel lacks and where to declare it."""
     shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
     return (
-        f"the wheel lacks {len(missing)} file(s) the checkout tracks: {shown}. Data files go in "
+        f"the wheel lacks {len(missing)} file(s) of the checkout's src/{PACKAGE}: {shown}. Data files go in "
         "[tool.setuptools.package-data] in pyproject.toml; a folder of modules needs an __init__.py."
     )
 
@@ -138,21 +152,22 @@ def user_env(venv: Path) -> dict:
     return env
 
 
-def build(steps: Steps) -> Path:
-    """sdist, then the wheel from it (build's default), into work/dist; the wheel's path."""
+def build(steps: Steps, sources: list[str]) -> Path:
+    """The sources copied to work/source, then the sdist and the wheel from it (build's default) into work/dist; the wheel's path."""
     if importlib.util.find_spec("build") is None:
         raise CheckFailed("the `build` package is missing: pip install build (the test extra has it).")
-    steps.run("build", [sys.executable, "-m", "build", "--outdir", str(steps.work / "dist"), str(ROOT)])
+    copy_files(ROOT, sources, steps.work / "source")
+    steps.run("build", [sys.executable, "-m", "build", "--outdir", str(steps.work / "dist"), str(steps.work / "source")])
     wheels = sorted((steps.work / "dist").glob("*.whl"))
     if len(wheels) != 1 or not list((steps.work / "dist").glob("*.tar.gz")):
         raise CheckFailed(f"python -m build made {[p.name for p in (steps.work / 'dist').iterdir()]}; expected one sdist and one wheel.")
     return wheels[0]
 
 
-def check_contents(wheel: Path, version: str) -> None:
+def check_contents(wheel: Path, version: str, sources: list[str]) -> None:
     if not wheel.name.startswith(f"{PACKAGE}-{version}-"):
         raise CheckFailed(f"the wheel is {wheel.name}, but src/{PACKAGE}/__init__.py says {version}: pyproject must read the version from there.")
-    missing = missing_from_wheel(wheel, tracked_package_files(ROOT))
+    missing = missing_from_wheel(wheel, package_files(sources))
     if missing:
         raise CheckFailed(missing_message(missing))
 
@@ -247,8 +262,9 @@ def check(work: Path) -> dict[str, float]:
     """Every step in ``work``; the seconds each took."""
     steps = Steps(work)
     version = source_version(ROOT)
-    wheel = steps.step("build the sdist and the wheel", build, steps)
-    steps.step("wheel contents", check_contents, wheel, version)
+    sources = source_files(ROOT)
+    wheel = steps.step("build the sdist and the wheel", build, steps, sources)
+    steps.step("wheel contents", check_contents, wheel, version, sources)
     venv = steps.step("fresh virtualenv with the wheel", install, steps, wheel)
     env = user_env(venv)
     steps.step("import location", check_import_location, steps, venv, env)

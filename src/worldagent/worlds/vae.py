@@ -33,7 +33,8 @@ from worldagent.files import write_bytes, write_text
 from worldagent.progress import progress_bar
 
 CHECKPOINT_VERSION = 1
-LATEST_FILE = "latest.msgpack"  # the last epoch's weights, to resume from (vae.msgpack holds the kept epoch's)
+STATE_FILE = "training.msgpack"  # where training stands, in one atomic file: a killed run resumes from it exactly
+LATEST_FILE = "latest.msgpack"  # checkpoints before STATE_FILE: the last epoch's weights (and optimizer.msgpack), read to resume them
 # Settings added after version 1, at the values that reproduce how older checkpoints were trained
 # (a resumed old run keeps training the way it started).
 LEGACY_CONFIG = {"free_bits": 0.0, "patience": 0}
@@ -394,13 +395,17 @@ def train_vae(dataset, config: VAEConfig = VAEConfig(), progress: bool = True, c
             if checkpoint_dir is not None:
                 _checkpoint(checkpoint_dir, trained, params, opt_state)
             advance(1, loss=float(loss), holdout=held)
-    return TrainedVAE(model, kept_params, config, dataset.env, tuple(dataset.cell_shape), dataset.fingerprint, history, held_idx, kept or None)
+    final = TrainedVAE(model, kept_params, config, dataset.env, tuple(dataset.cell_shape), dataset.fingerprint, history, held_idx, kept or None)
+    if checkpoint_dir is not None:  # a run killed between its last state and its vae.json resumes with no epoch left: write them here
+        final.save(checkpoint_dir)
+    return final
 
 
 def _checkpoint(directory, trained: TrainedVAE, params, opt_state) -> None:
-    """Where training stands (``latest.msgpack``, ``optimizer.msgpack``), then the kept VAE (its ``vae.json`` last)."""
-    write_bytes(Path(directory) / LATEST_FILE, serialization.to_bytes(params))
-    write_bytes(Path(directory) / "optimizer.msgpack", serialization.to_bytes(opt_state))
+    """Where training stands (``STATE_FILE``: weights, optimizer, kept weights and history in one atomic write, so a kill
+    between files cannot pair one epoch's weights with another's optimizer), then the kept VAE (``vae.msgpack``, ``vae.json``)."""
+    state = {"params": params, "opt_state": opt_state, "kept_params": trained.params, "kept": trained.kept_epoch or 0}
+    write_bytes(Path(directory) / STATE_FILE, serialization.to_bytes({**state, "history": json.dumps(trained.history)}))
     trained.save(directory)
 
 
@@ -421,6 +426,13 @@ def _resume(directory, dataset, config: VAEConfig, optimizer):
         raise WorldagentError(
             f"{directory} holds a VAE trained on other data or settings{settings}; pass a new --out directory or the same dataset and options."
         )
+    state_file = Path(directory) / STATE_FILE
+    if state_file.exists():  # one file, written whole: the weights, optimizer, kept weights and history of one epoch
+        template = {"params": previous.params, "opt_state": optimizer.init(previous.params), "kept_params": previous.params, "kept": 0, "history": ""}
+        state = serialization.from_bytes(template, state_file.read_bytes())
+        params, kept_params = (jax.tree_util.tree_map(jnp.asarray, state[name]) for name in ("params", "kept_params"))
+        history = json.loads(state["history"])
+        return params, state["opt_state"], history, kept_params, int(state["kept"]) or len(history)
     opt_state = serialization.from_bytes(optimizer.init(previous.params), (Path(directory) / "optimizer.msgpack").read_bytes())
     latest = Path(directory) / LATEST_FILE
     params = serialization.from_bytes(previous.params, latest.read_bytes()) if latest.exists() else previous.params

@@ -221,7 +221,10 @@ class Run:
 
         - ``request``: its recorded config (``Preset.curriculum_of``: name, settings, target), None for ``dr``;
         - ``label``: as the agent's ``run.json`` records it (``curricula.label``: ``"dr"``, or the name and every setting);
-        - ``snapshots``: the buffer at every checkpoint (``curricula.snapshots.load_snapshots``; [] for ``dr``).
+        - ``snapshots``: the buffer at every checkpoint (``curricula.snapshots.load_snapshots``; [] for ``dr``);
+        - ``favoured``: the last snapshot's favoured worlds as confirmed on fresh episodes, read back from the store
+          with the random campaign's failure rate as baseline (``analysis.favoured.read_favoured``); None when the
+          agent phase confirmed none (``dr``, runs from before confirmation).
         """
         if env in self.parts or not self.done(env, "agent"):
             return None
@@ -229,7 +232,15 @@ class Run:
 
         request = self.phases(env)["agent"].get("config", {}).get("curriculum")
         label = self.outputs(env, "agent").get("curriculum", "dr" if request is None else request["name"])  # runs before the field: dr
-        return {"request": request, "label": label, "snapshots": load_snapshots(self.layout(env).agent_dir)}
+        snapshots, record, favoured = load_snapshots(self.layout(env).agent_dir), self.outputs(env, "agent").get("favoured"), None
+        if record and snapshots and self.has_store(env):
+            from worldagent.analysis.favoured import read_favoured
+            from worldagent.envs import registry
+
+            randoms = self.random_campaign(env)
+            with self.store(env) as store:
+                favoured = read_favoured(store, registry.get(env), snapshots[-1], record, store.evaluations(randoms) if randoms else None)
+        return {"request": request, "label": label, "snapshots": snapshots, "favoured": favoured}
 
     def store_path(self, env: str) -> Path:
         return self.parts[env].store if env in self.parts else self.layout(env).store_path

@@ -19,8 +19,12 @@ from worldagent.commands.options import (
     option_flag,
     set_flag,
 )
+from worldagent.commands.strategic import check_confirm
 from worldagent.errors import WorldagentError
-from worldagent.files import check_writable
+from worldagent.files import check_writable, write_text
+
+BASELINE_WORLDS = 100  # random G(z) worlds (8 episodes each) the agent plays: "harder than average" compares with them
+FAVOURED_FILE = "favoured.json"
 
 
 def interrupted(out: Path) -> str:
@@ -30,6 +34,53 @@ def interrupted(out: Path) -> str:
     if (out / CHECKPOINT_FILE).is_file():
         return f"interrupted: checkpoint saved in {out / CHECKPOINT_FILE}; run the same command again to resume (it ends where an uninterrupted run would)."
     return f"interrupted before the first checkpoint; run the same command again to start {out} afresh."
+
+
+def favoured_confirm_flag():
+    """``--confirm N``: fresh episodes per favoured world of an adaptive curriculum (``analysis.confirm.REPEATS``; 0 skips)."""
+    from worldagent.analysis.confirm import REPEATS
+
+    return typer.Option(
+        REPEATS,
+        "--confirm",
+        help="With an adaptive curriculum: fresh episodes (from keys no search or training draws) to replay each of the worlds its buffer "
+        f"favoured most on, against {BASELINE_WORLDS} random G(z) worlds; 0 skips. The buffer's scores are noisy, its favourites partly luck.",
+    )
+
+
+def confirm_favourites(spec, out: Path, curriculum, options: dict, repeats: int, seed: int, progress: bool) -> str:
+    """The line on the curriculum's favoured worlds: the last buffer's highest scores replayed with the trained agent
+    on ``repeats`` fresh episodes each (``analysis.favoured``), against its failure rate on ``BASELINE_WORLDS`` random
+    G(z) worlds; both kept in OUT/store.sqlite (a rerun reads them back), found beside confirmed in OUT/favoured.json.
+    "" when the run kept no buffer snapshot or its last buffer was empty."""
+    import json
+
+    from worldagent import experiments
+    from worldagent.analysis.confirm import random_failure_rate
+    from worldagent.analysis.favoured import confirm_favoured, failure_event, favoured_line, favoured_rows, scored_by
+    from worldagent.curricula.snapshots import load_snapshots
+    from worldagent.influence.statistics import json_safe
+    from worldagent.store import RunStore
+
+    snapshots = load_snapshots(out)
+    if not snapshots or not len(snapshots[-1]["score"]):
+        return ""
+    setup = experiments.setup(spec.name, str(out), curriculum.worlds.generator, options=options)
+    failure, metric, score = failure_event(spec), spec.metrics.main, scored_by(curriculum)
+    with RunStore(out) as store:
+        found = confirm_favoured(store, setup, snapshots[-1], curriculum=curriculum.name, score=score, repeats=repeats, seed=seed, progress=progress)
+        randoms = (
+            experiments.random_evaluation(store, setup, metric, worlds=BASELINE_WORLDS, seed=seed, progress=progress) if found and failure else []
+        )
+    baseline = random_failure_rate(randoms, failure) if randoms else None
+    record = {
+        "scored_by": score,
+        "random_worlds": len(randoms),
+        "random_failure_rate": baseline,
+        "favoured": favoured_rows(found, metric, failure, baseline),
+    }
+    write_text(out / FAVOURED_FILE, json.dumps(json_safe(record), indent=2) + "\n")
+    return f"{favoured_line(found, metric, failure, baseline)}; found (the buffer's {score}) beside confirmed: {out / FAVOURED_FILE}"
 
 
 def register(app: typer.Typer) -> None:
@@ -55,6 +106,7 @@ def register(app: typer.Typer) -> None:
         option: list[str] = option_flag(),
         settings: list[str] = set_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the run."),
+        confirm: int = favoured_confirm_flag(),
         keep_every: int = typer.Option(
             None, "--keep-every", help="Also keep the agent every N episodes in OUT/snapshots/<episodes>/ (an --agent for diff, evaluate, ...)."
         ),
@@ -74,6 +126,7 @@ def register(app: typer.Typer) -> None:
         options = env_options(env, option)
         check_training_episodes(episodes)
         check_seed(seed)
+        check_confirm(confirm)
         check_writable(out, folder=True)
         if keep_every is not None and keep_every < 1:
             raise WorldagentError(f"--keep-every {keep_every}; pass a positive number of episodes, e.g. half of --episodes.")
@@ -102,3 +155,7 @@ def register(app: typer.Typer) -> None:
             console.print(f"kept the agent at {len(kept)} points of training: {', '.join(str(p) for p in kept)}")
         if (out / "curriculum.png").is_file():
             console.print(f"the curriculum's buffer over training: {out / 'curriculum.png'} (snapshots in {out / 'curriculum'})")
+        if getattr(schedule, "adaptive", False) and confirm:
+            said = confirm_favourites(spec, out, schedule, options, confirm, seed, not quiet)
+            if said:
+                console.print(said, highlight=False)

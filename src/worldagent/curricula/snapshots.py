@@ -2,7 +2,9 @@
 
 ``OUT/curriculum/buffer-UPDATE.npz`` holds the buffer's latents, scores, episode counts and
 ages at that update (filled slots only), so a run can be read back as a film of what training
-was steered toward (``reports.curriculum``).
+was steered toward (``reports.curriculum``). The last snapshot's ``FAVOURITES`` highest scores are
+the worlds it favoured most: drawn and listed by the report, confirmed on fresh episodes by
+``analysis.favoured``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from worldagent.curricula.buffer import Buffer
 from worldagent.files import write_atomically
 
 FOLDER = "curriculum"
+FAVOURITES = 4  # the latents of highest score a run reports (drawn, listed, confirmed) per environment
 
 
 def find_buffer(state: Any) -> Buffer | None:
@@ -52,3 +55,8 @@ def load_snapshots(out_dir: Path) -> list[dict[str, np.ndarray]]:
     """Every snapshot of a run, in update order ([] when it kept none)."""
     paths = sorted((Path(out_dir) / FOLDER).glob("buffer-*.npz"))
     return [dict(np.load(path)) for path in paths]
+
+
+def favourite_order(snapshot: dict, count: int = FAVOURITES) -> np.ndarray:
+    """int[k]: the buffer slots of the ``count`` highest scores in a snapshot (best first, earliest slot on ties)."""
+    return np.argsort(-np.asarray(snapshot["score"]), kind="stable")[:count]

@@ -3,12 +3,15 @@
 Left: the buffer's scores over training (median, 90th percentile and maximum of the latents it
 held at each checkpoint) and how full it was. Middle: the last buffer's latents on a 2-D
 projection (the two principal axes of the latents), coloured by score. Right: the worlds it
-favoured most at the end (highest replay probability), decoded by the generator and drawn as
-the environment draws worlds.
+favoured most at the end (highest score), decoded by the generator and drawn as the environment
+draws worlds.
 
 ``curriculum_section`` is the report's "Curriculum" section: per environment, what the agent
 phase's curriculum was (``runs.Run.curriculum``), this figure redrawn from the agent's
-snapshots, and the latents it favoured most; for ``dr`` one line on how to ask for one.
+snapshots, and the latents it favoured most: found (the buffer's score, the figure the curriculum
+selected them on) beside confirmed (the final agent on fresh episodes, ``analysis.favoured``, read
+back from the store by ``runs``: nothing here plays an episode); for ``dr`` one line on how to ask
+for one.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from worldagent.curricula.snapshots import FAVOURITES, favourite_order
 from worldagent.files import write_atomically
 
 
@@ -42,11 +46,6 @@ def principal_plane(z: np.ndarray) -> np.ndarray:
     _, _, axes = np.linalg.svd(centred, full_matrices=False)
     plane = centred @ axes[:2].T
     return np.pad(plane, ((0, 0), (0, 2 - plane.shape[1])))
-
-
-def favourite_order(snapshot: dict, count: int) -> np.ndarray:
-    """int[k]: the buffer slots of the ``count`` highest scores in a snapshot (best first, earliest slot on ties)."""
-    return np.argsort(-np.asarray(snapshot["score"]), kind="stable")[:count]
 
 
 def favourite_latents(snapshot: dict, count: int) -> np.ndarray:
@@ -116,7 +115,6 @@ def curriculum_figure(snapshots: list[dict], spec: Any, generator: Any, out: Pat
 
 # -- the report's section -----------------------------------------------------------------------
 
-FAVOURITES = 4  # latents listed (and worlds drawn) per environment
 SHOWN_DIMENSIONS = 8  # latent coordinates written out per favoured latent
 
 
@@ -163,37 +161,84 @@ def _curriculum_block(run: Any, env: str, res: dict, found: dict) -> str:
         f"{env}: the buffer's scores over training ({len(snapshots)} snapshot{'s' if len(snapshots) != 1 else ''}), its latents at the end on their two principal axes, "
         "and the worlds G(z) of the latents it favoured most"
     )
-    return text + image(figure, caption) + favourites_table(env, snapshots[-1])
+    return text + image(figure, caption) + favourites_table(env, snapshots[-1], found.get("favoured"))
 
 
-def favourites_table(env: str, snapshot: dict) -> str:
-    """The last snapshot's highest-scoring latents: score, episodes, age and coordinates (rounded)."""
+def favourites_table(env: str, snapshot: dict, favoured: dict | None = None) -> str:
+    """The last snapshot's highest-scoring latents: found (the buffer's score, episodes, age) beside confirmed (the
+    main metric and the failure rate on fresh episodes, 95% intervals; ``runs.Run.curriculum``'s ``favoured``), the
+    coordinates (rounded), and how many are confirmed harder than average."""
     from worldagent.reports.page import fmt, missing, number, table
 
     held = len(snapshot["score"])
     if not held:
         return missing(f"the buffer held no latent at update {int(snapshot['update']):,} (no episode had ended)")
     order = favourite_order(snapshot, FAVOURITES)
+    worlds = (favoured or {}).get("worlds") or [None] * len(order)
+    metric, failure = (favoured or {}).get("metric", "main metric"), (favoured or {}).get("failure")
     rows = []
-    for rank, slot in enumerate(order, start=1):
+    for rank, (slot, world) in enumerate(zip(order, worlds), start=1):
         z = np.asarray(snapshot["z"][slot], np.float64)
         shown = " ".join(f"{v:.2f}" for v in z[:SHOWN_DIMENSIONS]) + (" …" if len(z) > SHOWN_DIMENSIONS else "")
+        key = f"{env}.curriculum.favoured{rank}"
         rows.append(
             [
                 f"<td>#{rank}</td>",
-                number(f"{env}.curriculum.favoured{rank}.score", float(snapshot["score"][slot])),
+                number(f"{key}.score", float(snapshot["score"][slot])),
                 f"<td class='num'>{fmt(int(snapshot['count'][slot]))}</td>",
                 f"<td class='num'>{fmt(int(snapshot['age'][slot]))}</td>",
+                interval_cell(f"{key}.confirmed", None if world is None else world.confirmed(metric)),
+                interval_cell(f"{key}.failure_rate", None if world is None or failure is None else world.failure_rate(failure), 3),
                 f"<td class='num'>{fmt(float(np.linalg.norm(z)), 3)}</td>",
                 f"<td><code>{shown}</code></td>",
             ]
         )
+    repeats = next((w.repeats for w in worlds if w is not None), None)
+    fresh = "not confirmed" if repeats is None else f"{repeats} fresh episodes"
     head = [
         "favoured",
-        "score",
-        "episodes",
+        f"found: the buffer's score ({(favoured or {}).get('scored_by') or 'the selection'})",
+        "episodes scored",
         "episodes since last scored",
+        f"confirmed {metric} [95%] ({fresh})",
+        f"confirmed failure rate [95%]{'' if failure is None else f' ({failure.describe()})'}",
         "|z|",
         f"z (first {min(len(snapshot['z'][0]), SHOWN_DIMENSIONS)} dimensions)",
     ]
-    return f"<h4>The latents it favoured most, of {held:,} held at update {int(snapshot['update']):,}</h4>" + table(head, rows, raw_cells=True)
+    title = (
+        f"<h4>The latents it favoured most, of {held:,} held at update {int(snapshot['update']):,}: found (the buffer's score) beside confirmed</h4>"
+    )
+    return title + table(head, rows, raw_cells=True) + favoured_verdict(env, favoured)
+
+
+def interval_cell(key: str, interval: Any, digits: int = 4) -> str:
+    """A confirmed figure's cell: its mean (machine-readable) and 95% interval; "n/a" when not confirmed."""
+    from worldagent.reports.page import fmt, number
+
+    if interval is None:
+        return number(key, None)
+    return number(key, interval.mean, digits, f" [{fmt(interval.low, 3)}, {fmt(interval.high, 3)}]")
+
+
+def favoured_verdict(env: str, favoured: dict | None) -> str:
+    """The paragraph under the favourites table: "k of N favoured worlds confirmed harder than average", the
+    baseline it compares with, or why there is no verdict."""
+    from worldagent.analysis.favoured import favoured_line, harder_count
+    from worldagent.reports.page import esc, missing
+
+    if not favoured or not any(w is not None for w in favoured["worlds"]):
+        return missing(
+            "The favoured worlds were not confirmed on fresh episodes (a run from before confirmation): their scores above are the "
+            "buffer's selection, partly luck (docs/noise.md)."
+        )
+    failure, baseline = favoured["failure"], favoured["baseline"]
+    line = favoured_line(favoured["worlds"], favoured["metric"], failure, baseline)
+    attributes = ""
+    if failure is not None and baseline is not None:
+        k, n = harder_count(favoured["worlds"], failure, baseline)
+        attributes = f" data-key='{esc(env)}.curriculum.harder' data-value='{k}' data-of='{n}'"
+    return (
+        f"<p class='favoured-verdict'{attributes}>{esc(line[0].upper() + line[1:])}. Found is the buffer's own score, the figure the "
+        "curriculum selected them on (partly luck, docs/noise.md); confirmed is the final agent on the same world G(z) on fresh episodes "
+        "no search or training drew.</p>"
+    )

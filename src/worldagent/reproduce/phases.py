@@ -211,6 +211,14 @@ def agent_phase(ctx: EnvContext) -> dict:
     )
     last = last_values(result.curve, (spec.metrics.main, *spec.metrics.highlighted))
     shown = ", ".join(f"{name} {value:.3g}" for name, value in last.items())
+    favoured = {}
+    if getattr(distribution, "adaptive", False):  # the buffer's favourites, replayed on fresh episodes (found beside confirmed)
+        from worldagent.analysis.favoured import confirm_last_favoured
+
+        with ctx.store() as store:
+            favoured = confirm_last_favoured(
+                store, ctx.setup(), layout.agent_dir, distribution, repeats=ctx.preset.confirm, seed=ctx.seed, progress=ctx.progress
+            )
     return {
         "agent": layout.rel(layout.agent_dir / "policy"),
         "curve": layout.rel(layout.agent_dir / "curve.png"),
@@ -221,7 +229,8 @@ def agent_phase(ctx: EnvContext) -> dict:
         "train_s": round(result.wall_seconds, 2),
         "final": last,
         "curriculum": label(distribution),  # "dr", or the adaptive curriculum with its settings, as run.json records it
-        "summary": f"{ctx.algo} {result.episodes:,} episodes{via(distribution)}; last update: {shown or 'no curve'}",
+        **({"favoured": favoured} if favoured else {}),  # which stored confirmations are the favoured worlds' (the report re-reads them)
+        "summary": f"{ctx.algo} {result.episodes:,} episodes{via(distribution)}; last update: {shown or 'no curve'}" + favoured.get("said", ""),
     }
 
 

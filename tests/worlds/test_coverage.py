@@ -140,7 +140,7 @@ def test_the_uncovered_warning_fires_on_a_narrowed_generator_only(scatter_sides)
 
 
 def test_racing_reads_its_checkpoint_draws_back_off_its_tracks(racing_data):
-    """Named in the walker's order: the read radii follow the drawn ones (angles too, squeezed, issue 48)."""
+    """Named in the walker's order: the read radii follow the drawn ones (angles too, less closely)."""
     from worldagent.envs.racing import walker
     from worldagent.envs.racing.open_repair import to_unit
 

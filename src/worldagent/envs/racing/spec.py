@@ -175,9 +175,9 @@ def checkpoint_draws(tracks) -> dict[str, np.ndarray]:
     ``angle_k``: checkpoint k's angle within its 30-degree sector, ``radius_k``: its radius, k = 1..10,
     each on the unit scale of upstream's uniform ranges (std 0.289 when drawn). Read as the open repair
     reads a decode (``OpenTracks.draws``: the footprint's radial profile through its fitted inverse), on the
-    footprint rasters as certain logits: cheap (batched, jitted), not exact (on CarRacing's own tracks it
-    pulls angles towards their sectors' centres, issue 48), but the same reading on both sides, so G(z)
-    against fresh tracks compares like with like.
+    footprint rasters as certain logits: cheap (batched, jitted), not exact (on CarRacing's own tracks the
+    read draws correlate 0.69-0.99 with the drawn ones, with their spread), and the same reading on both
+    sides, so G(z) against fresh tracks compares like with like.
     """
     repair, read = _draw_reader()
     raster = np.asarray(tracks.raster, bool).reshape(len(tracks.raster), -1)

@@ -101,7 +101,7 @@ def test_check_with_a_generator_finds_a_descriptor_constant_on_decoded_worlds_on
     "arguments, message",
     [
         (["check", "chess"], "unknown environment 'chess'"),
-        (["check", "toy", "--generator", "no/such/generator"], "holds no generator"),
+        (["check", "toy", "--generator", "no/such/generator"], "holds no generator; train one with `worldagent generator train toy --out"),
         (["check", "racing", "--generator", "GENERATOR"], "makes toy worlds; pass a racing generator"),
     ],
 )

@@ -153,7 +153,7 @@ def diff_setup(
     if isinstance(generator, (str, Path)):
         from worldagent.worlds.generator import load_generator
 
-        where, generator = generator, load_generator(generator)[0]
+        where, generator = generator, load_generator(generator, env=spec.name)[0]
         if generator.env != spec.name:
             raise WorldagentError(f"the generator in {where} makes {generator.env} worlds; pass a {spec.name} generator.")
     elif generator is not None and generator.env != spec.name:

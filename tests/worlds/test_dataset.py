@@ -67,6 +67,10 @@ def test_bad_files_are_refused_with_a_clear_message(tmp_path, racing_data):
         WorldDataset.load(_rewrite(good, tmp_path, cells=flipped))
     with pytest.raises(WorldagentError, match="inconsistent"):
         WorldDataset.load(_rewrite(good, tmp_path, seeds=np.arange(5)))
+    with np.load(good, allow_pickle=False) as data:  # a well-formed file of no worlds: every per-world array empty
+        empty = {name: data[name][:0] for name in data.files if name in ("seeds", "cells") or name.startswith("world/")}
+    with pytest.raises(WorldagentError, match="holds no worlds"):
+        WorldDataset.load(_rewrite(good, tmp_path, **empty))
 
 
 def test_bad_requests_are_refused():

@@ -187,7 +187,7 @@ def world_distribution(
             raise WorldagentError("'vae' needs a generator directory; pass generator_dir (made by `worldagent generator train`).")
         from worldagent.worlds.generator import load_generator
 
-        generator, _, _ = load_generator(directory)
+        generator, _, _ = load_generator(directory, env=name)
         if generator.env != name:
             raise WorldagentError(f"generator {directory} makes {generator.env} worlds, not {name} worlds; pass a {name} generator.")
         return LatentWorlds(generator)

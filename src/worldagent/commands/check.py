@@ -23,7 +23,7 @@ def load_checked_generator(env: str, directory: Path):
     """The generator in ``directory``, refused in one line when it makes another environment's worlds."""
     from worldagent.worlds.generator import load_generator
 
-    generator = load_generator(directory)[0]
+    generator = load_generator(directory, env=env)[0]
     if generator.env != env:
         raise WorldagentError(f"the generator in {directory} makes {generator.env} worlds; pass a {env} generator (or check {generator.env}).")
     return generator

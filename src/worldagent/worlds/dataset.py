@@ -123,6 +123,8 @@ class WorldDataset:
         if set(fields) != expected:
             raise WorldagentError(f"dataset file {path} has world fields {sorted(fields)}, expected {sorted(expected)}; {remedy}.")
         n = len(seeds)
+        if n == 0:
+            raise WorldagentError(f"dataset file {path} holds no worlds; pass a file with at least one ({remedy}).")
         bad = [name for name, value in fields.items() if len(value) != n]
         if seeds.ndim != 1 or cells.shape != (n, int(np.prod(cell_shape))) or bad or cell_shape != tuple(spec.cell_shape):
             raise WorldagentError(

@@ -173,13 +173,18 @@ def save_generator(directory: Path | str, vae: TrainedVAE, dataset_path: Path | 
     return directory
 
 
-def load_generator(directory: Path | str, dataset_path: Path | str | None = None) -> tuple[Generator, TrainedVAE, WorldDataset]:
-    """(G, its VAE, its dataset) from a generator directory; ``dataset_path`` overrides the recorded one."""
+def load_generator(
+    directory: Path | str, dataset_path: Path | str | None = None, env: str | None = None
+) -> tuple[Generator, TrainedVAE, WorldDataset]:
+    """(G, its VAE, its dataset) from a generator directory; ``dataset_path`` overrides the recorded one; ``env``, when the
+    caller knows it, names the environment in the command a refusal gives."""
     directory = Path(directory)
     try:
         meta = json.loads((directory / GENERATOR_FILE).read_text())
     except (OSError, ValueError):
-        raise WorldagentError(f"{directory} holds no generator; train one with `worldagent generator train ENV --out {directory}`.") from None
-    vae = TrainedVAE.load(directory)
+        raise WorldagentError(
+            f"{directory} holds no generator; train one with `worldagent generator train {env or 'ENV'} --out {directory}`."
+        ) from None
+    vae = TrainedVAE.load(directory, env or meta.get("env"))
     dataset = WorldDataset.load(dataset_path or meta["dataset"], env=meta["env"])
     return build_generator(vae, dataset, _repair_config(meta), repair_name=_repair_name(meta)), vae, dataset

@@ -229,10 +229,10 @@ class TrainedVAE:
         return directory
 
     @classmethod
-    def load(cls, directory: Path | str) -> TrainedVAE:
-        """Read a checkpoint written by ``save``; refuses other versions and architectures."""
+    def load(cls, directory: Path | str, env: str | None = None) -> TrainedVAE:
+        """Read a checkpoint written by ``save``; refuses other versions and architectures (``env``: named in the refusal)."""
         directory = Path(directory)
-        remedy = f"train one with `worldagent generator train ENV --out {directory}`"
+        remedy = f"train one with `worldagent generator train {env or 'ENV'} --out {directory}`"
         try:
             meta = json.loads((directory / "vae.json").read_text())
             blob = (directory / "vae.msgpack").read_bytes()

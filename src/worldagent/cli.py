@@ -10,11 +10,13 @@ from __future__ import annotations
 import typer
 
 from worldagent.commands import register_all
+from worldagent.commands.interrupted import InterruptedGroup
 
 app = typer.Typer(
     help="Find the worlds in which trained RL agents fail or shine, and reshape what they train on.",
     no_args_is_help=True,
     add_completion=False,
+    cls=InterruptedGroup,  # Ctrl-C in any command: one line on what its run directory kept and how to resume
 )
 
 

@@ -21,7 +21,7 @@ that holds the true value; each row carries its Monte-Carlo standard error sqrt(
   no interval from that sample can know them; ``diff`` flags an α-CVaR interval whose tail holds
   fewer than ``analysis.diff.MIN_TAIL_WORLDS`` worlds (each row's ``flagged``).
 
-Results: ``benchmarks/results/diff-coverage-cpu.json``; the README's "Which worlds got worse?" quotes them.
+Results: ``benchmarks/results/diff-coverage-cpu.json``; ``docs/diff.md`` (which worlds got worse) quotes them.
 """
 
 from __future__ import annotations

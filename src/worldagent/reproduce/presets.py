@@ -8,7 +8,7 @@ no edit here:
 - ``paper``: the paper's budgets (§5.2–§6: 10,000 worlds, 10,000 racing / 5,000 harvest
   training episodes, CMA-ES population 21, 8 episodes per world, 1,000 random worlds). Search
   and influence budgets the paper does not state are ours (marked in the field docs). For a GPU.
-- ``quick``: the README's main job. Small budgets that finish both environments in under
+- ``quick``: the main job (``docs/main-job.md``). Small budgets that finish both environments in under
   10 minutes on 2 CPU cores and still show every phenomenon: a high random mean beside a
   much lower minimum and a higher maximum, ES against BO against random search, and the
   influenced agents' metrics beside the default ones.

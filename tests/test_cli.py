@@ -80,6 +80,7 @@ def test_option_errors_are_one_line(tmp_path):
     assert not (tmp_path / "e.png").exists()
 
 
+@pytest.mark.integration
 def test_dataset_and_generator_commands_end_to_end(tmp_path):
     data = tmp_path / "harvest.npz"
     assert runner.invoke(app, ["dataset", "harvest", "--n", "40", "--out", str(data), "--quiet"]).exit_code == 0
@@ -157,6 +158,7 @@ def _small_worlds(env, path):
     return make_dataset(env, 16, 0, progress=False).save(path)
 
 
+@pytest.mark.integration
 def test_train_writes_an_agent_that_search_can_load(tmp_path):
     from worldagent.agents.loaders import load_agent
     from worldagent.envs import registry

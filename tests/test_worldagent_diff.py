@@ -22,6 +22,8 @@ from worldagent.envs.racing.env import ACTION_DIRECTIONS
 from worldagent.errors import WorldagentError
 from worldagent.store import Evaluation, RunStore
 
+pytestmark = pytest.mark.integration  # whole diff runs (agents, searches, confirmations): .ci/run's integration step runs it
+
 runner = CliRunner()
 SPEC = registry.get("racing")
 BLIND_ANGLE = 2.3  # radians of left turn over the next 8 segments beyond which the copy stops steering
@@ -243,6 +245,7 @@ def test_the_gate_fails_a_planted_regression_and_passes_identical_agents(cli_inp
     assert again.exit_code == 0 and json.loads((tmp_path / "s" / "diff.json").read_text())["worlds"] == found["worlds"]  # a rerun resumes
 
 
+@pytest.mark.integration
 def test_worlds_from_a_stored_campaign_a_dataset_and_an_atlas_search(cli_inputs, monkeypatch, tmp_path, racing_data):
     folder, generator = cli_inputs
     agents = ["--agent", "scripted/driver", "--agent", "diff_drivers:blind", "--repeats", "1", "--quiet", "--confirm", "6"]

@@ -22,6 +22,7 @@ def setup():
     return env, env.default_params, world_distribution("racing", "generator", size=4, seed=0)
 
 
+@pytest.mark.integration
 def test_acktr_raises_the_return_on_a_fixed_track_set(setup):
     env, params, pool = setup
     trainer = make_train(TINY, env, params, pool, training_params)

@@ -105,6 +105,7 @@ def _group_reward(spec, policy, worlds, key, repeats=16):
     return float(jax.jit(jax.vmap(one))(jax.random.split(key, repeats))["group_reward"].mean())
 
 
+@pytest.mark.integration
 def test_dqn_beats_random_on_tiny_map(spec, trained, tiny_pool):
     result, _ = trained
     key = jax.random.key(7)
@@ -113,6 +114,7 @@ def test_dqn_beats_random_on_tiny_map(spec, trained, tiny_pool):
     assert learned > 2.0 * random, (learned, random)  # measured: about 26.5 vs 10-12
 
 
+@pytest.mark.integration
 def test_saved_agents_reload_and_act_identically(spec, trained):
     result, out = trained
     checkpoint = flax.serialization.msgpack_restore((out / training.CHECKPOINT_FILE).read_bytes())
@@ -126,6 +128,7 @@ def test_saved_agents_reload_and_act_identically(spec, trained):
     assert explorer.extra["act_epsilon"] == TINY.act_epsilon and explorer.num_agents == 4 and explorer.algorithm == "dqn"
 
 
+@pytest.mark.integration
 def test_run_directory_contents(trained):
     result, out = trained
     assert len(result.curve["group_reward"]) == TINY.num_chunks and result.env_steps == TINY.num_chunks * 16 * EPISODE
@@ -137,6 +140,7 @@ def test_run_directory_contents(trained):
     assert run["config"]["num_episodes"] == TINY.num_episodes and run["env"] == "tiny_harvest" and run["algorithm"] == "dqn"
 
 
+@pytest.mark.integration
 def test_resume_continues_from_checkpoint(spec, tiny_pool, tmp_path):
     short = TINY.with_episodes(16 * 4)  # compiled once, shared with `trained`
     full = training.train(spec, "dqn", short, tiny_pool, tmp_path / "a", progress=False)
@@ -159,6 +163,7 @@ def _one_jitted_run(spec, tiny_pool, keys):
     assert np.all(np.asarray(states.gradient_steps) > 0) and np.all(np.asarray(states.episodes) == 16)
 
 
+@pytest.mark.integration
 def test_make_train_is_one_jitted_run(spec, tiny_pool):
     _one_jitted_run(spec, tiny_pool, jax.random.key(0))
 
@@ -208,6 +213,7 @@ def test_bad_env_algorithm_and_distribution_are_refused(spec, tiny_pool, tmp_pat
         training.train(spec, "dqn", training_config("racing"), tiny_pool, tmp_path)
 
 
+@pytest.mark.integration
 def test_agents_of_another_architecture_are_refused(trained, tmp_path):
     _, out = trained
     meta = json.loads((out / "policy" / "policy.json").read_text())

@@ -88,6 +88,7 @@ def onnx_model(path, input_shape, num_actions, select=None, argmax=False):
     return path
 
 
+@pytest.mark.integration
 def test_the_host_evaluator_plays_the_jitted_policys_episodes_when_sampling(tracks):
     weights = jax.random.normal(jax.random.key(3), (RACING.observation_shape[0], 4))
     logits = lambda obs: 0.5 * obs @ weights
@@ -101,6 +102,7 @@ def test_the_host_evaluator_plays_the_jitted_policys_episodes_when_sampling(trac
     assert len(np.unique(want["steps"])) > 1  # the episodes differ, so the keys matter
 
 
+@pytest.mark.integration
 def test_a_scripted_harvest_policy_wrapped_both_ways_gives_the_same_metrics():
     env, params = Harvest(), make_params(can_tag=[True, False, False, False]).replace(max_steps=50)
     greedy = scripted_policy("harvest", "greedy")

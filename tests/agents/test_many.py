@@ -90,6 +90,7 @@ def trained(envs, tmp_path_factory):
 SLOW = pytest.mark.slow
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("algo", ["ppo", pytest.param("acktr", marks=SLOW), pytest.param("dqn", marks=SLOW)])
 def test_runs_together_give_the_agents_of_runs_alone(algo, trained):
     alone, together = trained(algo)
@@ -105,6 +106,7 @@ def test_runs_together_give_the_agents_of_runs_alone(algo, trained):
     assert _max_difference(together[0].agent.params, together[1].agent.params) > 100 * ATOL  # the two runs differ far beyond the tolerance
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("algo", ["ppo", pytest.param("dqn", marks=SLOW)])
 def test_a_killed_many_run_resumes_identically(algo, envs, trained, tmp_path):
     specs, pools = envs

@@ -33,6 +33,7 @@ def _mean_returns(env, network, stacked_params, worlds, key):
     return np.asarray(jax.jit(jax.vmap(per_params))(stacked_params))
 
 
+@pytest.mark.integration
 def test_ppo_raises_return_on_fixed_tracks_for_two_seeds(racing_env, racing_pool):
     pool = WorldPool.create(jax.tree_util.tree_map(lambda x: x[:4], racing_pool.worlds))
     trainer = make_train(LEARN, racing_env, racing_env.default_params, pool, training_params)
@@ -46,6 +47,7 @@ def test_ppo_raises_return_on_fixed_tracks_for_two_seeds(racing_env, racing_pool
     assert np.all(np.asarray(curves["active"]) == 1)
 
 
+@pytest.mark.integration
 def test_an_env_step_budget_stops_training_at_exactly_its_updates_and_anneals_by_it(racing_env, racing_pool, tiny_ppo):
     steps = 3 * tiny_ppo.num_envs * tiny_ppo.num_steps - 1  # spent during the 3rd update
     config = dataclasses.replace(tiny_ppo, total_episodes=10**6, total_env_steps=steps)
@@ -62,6 +64,7 @@ def test_an_env_step_budget_stops_training_at_exactly_its_updates_and_anneals_by
         dataclasses.replace(tiny_ppo, total_env_steps=-1)
 
 
+@pytest.mark.integration
 def test_train_is_vmappable_and_stops_at_the_budget(racing_env, racing_pool, tiny_ppo):
     trainer = make_train(tiny_ppo, racing_env, racing_env.default_params, racing_pool)
     states, curves = jax.vmap(trainer.train)(jax.random.split(jax.random.key(0), 2))

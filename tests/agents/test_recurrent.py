@@ -30,6 +30,8 @@ from worldagent.evaluation.local import evaluate
 from worldagent.evaluation.trajectories import replay_episode
 from worldagent.explore.episodes import replay_marked
 
+pytestmark = pytest.mark.integration  # whole-pipeline work: .ci/run's integration step runs it
+
 DELAY = 4  # steps per episode: the cue at the first, the answer at the last
 
 

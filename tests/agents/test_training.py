@@ -17,6 +17,7 @@ from worldagent.envs.racing.metrics import normalised_return, racing_return_boun
 from worldagent.errors import WorldagentError
 
 
+@pytest.mark.integration
 def test_train_writes_run_and_resumes_identically(tmp_path, monkeypatch, racing_spec, racing_pool, tiny_ppo):
     run = lambda out, **kw: train(racing_spec, "ppo", tiny_ppo, racing_pool, tmp_path / out, seed=3, progress=False, chunk_updates=2, **kw)  # noqa: E731
     whole = run("whole")
@@ -107,6 +108,7 @@ def test_normalised_return_bounds():
     assert float(normalised_return(jax.numpy.array(-130.0))) == pytest.approx(0.5)
 
 
+@pytest.mark.integration
 def test_keep_every_keeps_loadable_agents_along_the_way(tmp_path, racing_spec, racing_pool, tiny_ppo):
     from worldagent.agents.loaders import load_agent
 

@@ -109,6 +109,7 @@ def train_fielded(tmp_path, training_params=None) -> tuple[dict, dict]:
         return json.loads((tmp_path / "run.json").read_text())["config"], next(csv.DictReader(handle))
 
 
+@pytest.mark.integration
 def test_set_applies_is_recorded_and_a_toy_with_racing_like_fields_is_not_rewritten(tmp_path):
     config, first = train_fielded(tmp_path)
     assert (config["respawn"], config["crash_warmup"], config["num_envs"], config["hidden"], config["total_episodes"]) == (True, 0.5, 2, [8], 4)
@@ -116,6 +117,7 @@ def test_set_applies_is_recorded_and_a_toy_with_racing_like_fields_is_not_rewrit
     assert float(first["respawn"]) == 0.0 and float(first["crash_penalty"]) == 1.0  # respawn and the warm-up change nothing
 
 
+@pytest.mark.integration
 def test_a_spec_s_training_params_is_what_the_trainer_applies(tmp_path):
     _, first = train_fielded(
         tmp_path, lambda params, config, fraction: params.replace(respawn=config.respawn, crash_penalty=params.crash_penalty * fraction)

@@ -193,6 +193,7 @@ P_TWO = 2 * (1 - NormalDist().cdf(3.2))
 SEARCH = fr.ImportanceConfig(proposal="search")
 
 
+@pytest.mark.integration
 def test_a_mixture_covers_two_regions_where_a_single_mean_shift_fails():
     single = fr.ImportanceConfig(components=1, proposal="search")
     shift, _, _ = cross_entropy.learn_proposal(fr.Spender(two_sided, 0), np.random.default_rng(0), 10, single)
@@ -283,6 +284,7 @@ def test_an_event_that_never_occurs_is_refused_by_the_search_and_bounded_by_mont
 # -- the command -----------------------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_failure_rate_command_end_to_end(tmp_path, racing_vae, racing_data, racing_generator):
     from worldagent.worlds.generator import save_generator
 

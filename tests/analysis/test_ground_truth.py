@@ -20,6 +20,8 @@ from worldagent.search.given import GivenWorlds
 from worldagent.search.objectives import Objective
 from worldagent.store import Evaluation, RunStore
 
+pytestmark = pytest.mark.integration  # whole-pipeline work: .ci/run's integration step runs it
+
 SEEDS, WORLDS, REPEATS = 200, 16, 8
 NEVER = 20  # more searches whose 16 coins all have p = 0
 

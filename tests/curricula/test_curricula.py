@@ -162,6 +162,7 @@ def test_target_curriculum_needs_a_target(toy):
         make_curriculum("target", worlds)
 
 
+@pytest.mark.integration
 def test_a_killed_curriculum_run_resumes_with_the_identical_buffer(toy, tmp_path):
     spec, worlds = toy
     curriculum = make_curriculum("accel", worlds, {"buffer_size": 16, "min_fill": 0.25}, target_score(spec, "return", maximize=True))

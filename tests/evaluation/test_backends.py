@@ -102,6 +102,7 @@ class DiesOnce:
         return self.inner(z, seeds)
 
 
+@pytest.mark.integration
 def test_a_ray_campaign_fills_the_same_store_as_a_local_one_even_when_a_worker_dies(tmp_path, cluster, racing_generator):
     setup = experiments.setup("racing", "driver", racing_generator, repeats=2)
     objective = LatentObjective(Objective("racing", "return", False), setup.env, setup.policy, setup.generator, 2, setup.params)
@@ -114,6 +115,7 @@ def test_a_ray_campaign_fills_the_same_store_as_a_local_one_even_when_a_worker_d
     assert stored(tmp_path / "ray", "c") == stored(tmp_path / "local", "c")
 
 
+@pytest.mark.integration
 def test_the_search_command_on_ray_matches_local(tmp_path, cluster, racing_vae, racing_data, racing_generator, monkeypatch):
     from worldagent.worlds.generator import save_generator
 
@@ -132,6 +134,7 @@ def test_the_search_command_on_ray_matches_local(tmp_path, cluster, racing_vae, 
         assert store.campaign("cmaes-max-return-s0").config["agent"]["kind"] == "callable"
 
 
+@pytest.mark.integration
 @pytest.mark.slow  # ~16 s of one worker: the default run was 307 s of its 300 with it
 def test_many_runs_trained_on_ray_equal_those_trained_here_and_resume_there(tmp_path, cluster):
     """Issue 28: a program's runs as one Ray task give the agents a local many-run gives, resuming a killed run's checkpoints."""
@@ -154,6 +157,7 @@ def test_many_runs_trained_on_ray_equal_those_trained_here_and_resume_there(tmp_
             np.testing.assert_array_equal(x, y)
 
 
+@pytest.mark.integration
 def test_a_confirmation_on_ray_stores_the_rows_of_one_made_here(tmp_path, cluster, racing_generator):
     import dataclasses
 

@@ -20,6 +20,8 @@ from worldagent.worlds.dataset import make_dataset
 from worldagent.worlds.generator import build_generator, save_generator
 from worldagent.worlds.vae import VAEConfig, train_vae
 
+pytestmark = pytest.mark.integration  # whole-pipeline work: .ci/run's integration step runs it
+
 SCRIPT = r"""
 import json, sys
 import jax, jax.numpy as jnp, numpy as np

@@ -93,6 +93,7 @@ def test_bad_requests_get_clear_errors(worlds):
         evaluate(RACING, random_racing_policy(), one, 2, jax.random.key(0))
 
 
+@pytest.mark.integration
 def test_sharding_over_two_devices_gives_the_metrics_of_one(tmp_path, worlds):
     """Five worlds (padded to six) over two forced host devices, in a fresh process."""
     import os

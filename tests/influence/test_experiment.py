@@ -25,6 +25,8 @@ from worldagent.influence.worlds import example_indices
 from worldagent.reports.influence import influence_figure
 from worldagent.store import RunStore
 
+pytestmark = pytest.mark.integration  # whole-pipeline work: .ci/run's integration step runs it
+
 TINY_PPO = PPOConfig(total_episodes=8, num_envs=4, num_steps=16, num_minibatches=2, update_epochs=1, hidden=(8,))
 SELECT = "crash_rate > 0.5 and progress > 0.005"  # a random driver crashes; some worlds let it get further
 TINY_DQN = DQNConfig(

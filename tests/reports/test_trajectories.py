@@ -56,6 +56,7 @@ def test_the_keys_of_a_scored_world_replay_its_stored_episodes(racing_generator)
     assert episodes.metrics["crashed"].tolist() == [e["crashed"] for e in outcomes[1].episodes]
 
 
+@pytest.mark.integration
 def test_harvest_replays_keep_every_agents_cell():
     env = Harvest()
     maps = generate_maps(np.arange(2))

@@ -9,6 +9,16 @@ import pytest
 from worldagent.reproduce.pipeline import reproduce
 from worldagent.reproduce.presets import get_preset
 
+SHARED_RUN = ("racing_run", "racing_copy")
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest's -m selection reads the marks
+def pytest_collection_modifyitems(items):
+    """A test of the shared tiny run is an integration test: building the run compiles every phase (minutes on 2 cores)."""
+    for item in items:
+        if set(SHARED_RUN) & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.integration)
+
 
 @pytest.fixture(scope="session")
 def racing_run(tmp_path_factory):

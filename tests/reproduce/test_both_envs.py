@@ -11,6 +11,8 @@ from typer.testing import CliRunner
 from worldagent.cli import app
 from worldagent.reproduce.presets import PHASES
 
+pytestmark = pytest.mark.integration  # whole-pipeline work: .ci/run's integration step runs it
+
 
 @pytest.mark.slow
 def test_tiny_preset_runs_both_environments_from_the_command_line(tmp_path):

@@ -27,7 +27,7 @@ def best_after(name, budget, maximize=False, seed=0, objective=sphere):
     return max(seen) if maximize else min(seen)
 
 
-@pytest.mark.parametrize("name, budget", [("cmaes", 21 * 8), ("bo", 24)])
+@pytest.mark.parametrize("name, budget", [("cmaes", 21 * 8), pytest.param("bo", 24, marks=pytest.mark.integration)])  # bo: 100 s of GP fits
 def test_minimises_a_sphere_and_beats_random_search(name, budget):
     # medians over 9 seeds: at 24 evaluations one seed's best swings by 8x with the GP's fit (1.4 to 11.5 with
     # scikit-learn 1.9, scipy 1.17, bayesian-optimization 3.4), and 5 seeds' median fell to 0.64 of random's
@@ -228,6 +228,7 @@ def qd(kind, **kw):
     return AdaptiveQD(10, False, 0, grid, two_descriptors, QDConfig(emitters=2, batch=4))
 
 
+@pytest.mark.integration
 def test_the_corrected_atlas_re_asks_its_best_elites_after_the_search():
     opt = qd("corrected", search_generations=2)
     rng = np.random.default_rng(0)
@@ -243,6 +244,7 @@ def test_the_corrected_atlas_re_asks_its_best_elites_after_the_search():
     assert max(count for _, _, count in rows.values()) >= 2  # the corrected ones carry their re-evaluations
 
 
+@pytest.mark.integration
 def test_adaptive_sampling_lets_a_challenger_in_only_on_its_pooled_mean():
     from worldagent.search.atlas import CHALLENGE_EVALUATIONS
 

@@ -20,6 +20,7 @@ from worldagent.worlds.quality import figures
 BATCH = 32  # every eager harvest decode here: one shape, so JAX compiles each eager op once for the file
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("which", ["racing", "harvest"])
 def test_generator_runs_under_jit_and_vmap(which, request):
     generator = request.getfixturevalue(f"{which}_generator")
@@ -114,6 +115,7 @@ def test_the_repair_config_survives_save_and_load_and_old_files_load(tmp_path, h
         assert load_generator(tmp_path / "g")[0].repair.config == {"apples": expected, "walls": "nearest"}
 
 
+@pytest.mark.integration
 def test_quality_figures_at_small_scale(racing_generator, racing_data, harvest_generator, harvest_data):
     racing = figures(racing_generator, racing_data, 500, jax.random.key(0))
     assert racing["self_mapping_rate"] > 5 / len(racing_data)  # far above chance

@@ -49,6 +49,7 @@ def toy_run(tmp_path_factory):
         yield out, spec.name, preset
 
 
+@pytest.mark.integration
 def test_the_generator_phase_refuses_a_rejected_generator_and_records_a_waived_one(toy_run, monkeypatch):
     out, env, tiny = toy_run
     monkeypatch.setattr(quality, "diagnose", lambda *args, **kwargs: [OVERFIT])  # the gate's finding, whatever this VAE is

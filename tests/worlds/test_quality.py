@@ -58,6 +58,7 @@ def test_free_bits_keep_a_scattered_walls_generator_in_use(default_scatter, smal
     assert warnings == []
 
 
+@pytest.mark.integration
 def test_a_collapsed_generator_gets_the_collapse_warning(scatter_data, small_vae):
     config = replace(small_vae, beta=100.0, free_bits=0.0)
     vae = train_vae(scatter_data, config, progress=False)

@@ -143,6 +143,7 @@ def _same(a, b) -> bool:
 DIVERGING = {"holdout": 0.25, "warmup_epochs": 1, "patience": 0, "encoder": (16, 8), "decoder": (8, 16)}
 
 
+@pytest.mark.integration
 def test_training_keeps_the_best_held_out_epochs_weights(tmp_path, small_vae):
     """4 epochs return (and save) the same weights as 3: the kept epoch's, not the last's."""
     config = replace(small_vae, epochs=4, **DIVERGING)

@@ -92,6 +92,7 @@ def test_new_layouts_come_out_not_only_the_datasets(harvest_data):
     assert (np.asarray(repaired.walls) == fresh.walls).all(axis=(1, 2)).mean() >= 0.95
 
 
+@pytest.mark.integration
 def test_random_logits_give_valid_maps_with_rooms_closed_by_the_generators_rule(random_repaired):
     logits, repaired = random_repaired
     check_valid(repaired)

@@ -47,6 +47,7 @@ def test_every_repaired_track_is_valid(repair, repaired):
     decode(repair, noise).validate()
 
 
+@pytest.mark.integration
 def test_a_rejected_draw_is_projected_to_an_accepted_one():
     loops, retries = tracks.upstream_loops(np.arange(40), return_retries=True)
     seed = int(np.flatnonzero(retries)[0])  # upstream redraws this seed's first checkpoints

@@ -532,3 +532,17 @@ def test_switching_env_on_the_diff_view_leaves_none_of_its_table(diff_page, slow
     page.select_option("#env", "toy")
     page.wait_for_function("explorer.state.env === 'toy' && explorer.state.map !== null")
     assert page.is_visible("#diff-tab")
+
+
+def test_a_diff_written_while_serving_shows_after_a_reload(browser, toy_spec, fresh_toy_run, add_diff):
+    """`worldagent diff --out` into a run the explorer serves: a reload shows its Diff tab, campaign and A and B (no restart)."""
+    with serving(fresh_toy_run) as url, opened(browser, url) as page:
+        assert page.is_hidden("#diff-tab")  # no diff yet
+        add_diff(toy_spec, fresh_toy_run, {"diff-late-s0": (("homing", "random"), 2)})
+        page.reload()
+        page.wait_for_selector("body[data-ready='1']", timeout=WAIT_MS)
+        assert page.is_visible("#diff-tab")
+        page.click("button[data-view='diff']")
+        page.wait_for_function("document.querySelector('#diff-summary').textContent.startsWith('diff-late-s0:')")
+        assert "A: scripted homing, B: scripted random" in page.text_content("#diff-summary")
+        assert page.query_selector_all("#diff-table img")  # the regressed worlds' pictures

@@ -33,6 +33,7 @@ import io
 import json
 import os
 import sqlite3
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -149,9 +150,14 @@ class Selected:
     found_episodes: int
 
 
+# numpy parses each array's header with ast.literal_eval, which CPython 3.11.7 cannot run in two threads at once
+# ("SystemError: AST constructor recursion depth mismatch"): the explorer's server decodes a page's pictures in threads.
+_DECODING = threading.Lock()
+
+
 def decode_world(blob: bytes) -> dict[str, np.ndarray]:
-    """The arrays of a world stored with ``encode_world`` (no pickle)."""
-    with np.load(io.BytesIO(blob), allow_pickle=False) as data:
+    """The arrays of a world stored with ``encode_world`` (no pickle); one thread at a time (``_DECODING``)."""
+    with _DECODING, np.load(io.BytesIO(blob), allow_pickle=False) as data:
         return {name: data[name] for name in data.files}
 
 

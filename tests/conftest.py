@@ -73,8 +73,8 @@ def pytest_configure_node(node):
     node.workerinput["worldagent_loadgroup"] = node.config.option.dist == "loadgroup"
 
 
-# .ci/run sets this: its `pytest` (the README's command) runs the integration tests too, in the same session, so they
-# share its compilation cache and session fixtures (as a step of their own they compiled everything again).
+# .ci/run sets this: its `pytest` (the README's command) runs the integration and example tests too, in the same
+# session, so they share its compilation cache and session fixtures (as steps of their own they compiled it all again).
 WITH_INTEGRATION = os.environ.get("WORLDAGENT_TEST_INTEGRATION") == "1"
 
 
@@ -82,7 +82,7 @@ def pytest_configure(config):
     if getattr(config, "workerinput", {}).get("worldagent_loadgroup"):
         config.option.loadgroup = True
     if WITH_INTEGRATION:  # pyproject's default selection, less its "not integration"; an explicit -m is left alone
-        config.option.markexpr = config.option.markexpr.replace(" and not integration", "")
+        config.option.markexpr = config.option.markexpr.replace(" and not integration", "").replace(" and not example", "")
 
 
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups

@@ -77,6 +77,22 @@ def test_a_missing_token_is_named_as_the_cause():
     assert join_failure(ConnectionError("Failed to connect to Ray cluster"), "") == "Failed to connect to Ray cluster; check --ray-address."
 
 
+class Echo:
+    def __call__(self, z, seeds):
+        return z
+
+
+def test_each_evaluator_is_shipped_under_its_own_token_even_when_python_reuses_its_id():
+    """Workers cache evaluators by token: a freed evaluator's id() comes back for the next one, and a
+    token keyed on it made workers run the previous campaign's evaluator (latents of the wrong shape)."""
+    shipper = object.__new__(backends.RayBackend)
+    shipper.ray, shipper._shipped = type("FakeRay", (), {"put": staticmethod(lambda value: object())}), None
+    tokens = [shipper._ship(Echo())[0] for _ in range(20)]  # each freed at once: CPython hands its id to the next
+    assert len(set(tokens)) == 20
+    kept = lambda z, s: z  # noqa: E731
+    assert shipper._ship(kept) == shipper._ship(kept)  # the same evaluator is shipped once
+
+
 ray = pytest.importorskip("ray")
 
 

@@ -73,7 +73,7 @@ class RayBackend:
             join_cluster(ray, address, workers)
         self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         self._task = ray.remote(max_retries=TASK_RETRIES)(_evaluate_batch)
-        self._shipped: dict[int, tuple[str, Any]] = {}
+        self._shipped: tuple[Callable, str, Any] | None = None  # (evaluator, token, ref) last shipped
 
     def run(self, evaluate: Callable, batches: Sequence[Batch]) -> Iterator[tuple[list[int], Any]]:
         token, ref = self._ship(evaluate)
@@ -106,11 +106,13 @@ class RayBackend:
             raise WorldagentError(str(cause).splitlines()[0] if str(cause) else type(cause).__name__) from None
 
     def _ship(self, evaluate: Callable) -> tuple[str, Any]:
-        """The evaluator in the object store, once per evaluator, with a token workers cache it under."""
-        key = id(evaluate)
-        if key not in self._shipped:
-            self._shipped[key] = (uuid.uuid4().hex, self.ray.put(evaluate))
-        return self._shipped[key]
+        """The evaluator in the object store, once per evaluator, with a token workers cache it under.
+
+        Known by identity while held here: an ``id()`` alone is reused once an evaluator is freed, and
+        workers then ran the previous campaign's evaluator on the next one's batches."""
+        if self._shipped is None or self._shipped[0] is not evaluate:
+            self._shipped = (evaluate, uuid.uuid4().hex, self.ray.put(evaluate))
+        return self._shipped[1:]
 
 
 def join_cluster(ray: Any, address: str | None, workers: int | None) -> None:

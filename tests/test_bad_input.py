@@ -6,12 +6,12 @@ agent and generator loaded would answer "holds no generator" instead of the expe
 
 from __future__ import annotations
 
-import sqlite3
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
+from damaged_store import damage_evaluations, store_with_a_campaign
 from worldagent.cli import app
 from worldagent.files import can_create_files_in
 
@@ -123,19 +123,8 @@ def test_bad_input_gets_one_line_before_anything_loads(paths):
 
 
 def damaged_store(folder):
-    """A run store in ``folder`` whose evaluations table's root page is overwritten with junk."""
-    from worldagent.store import RunStore
-
-    with RunStore(folder):
-        pass
-    path = folder / "store.sqlite"
-    db = sqlite3.connect(path)
-    page_size = db.execute("PRAGMA page_size").fetchone()[0]
-    root = db.execute("SELECT rootpage FROM sqlite_master WHERE name = 'evaluations'").fetchone()[0]
-    db.close()
-    with open(path, "r+b") as handle:
-        handle.seek((root - 1) * page_size)
-        handle.write(b"\x07" * page_size)
+    """A run store in ``folder`` (campaign "c") whose evaluations table is damaged; ``folder``."""
+    damage_evaluations(store_with_a_campaign(folder))
     return folder
 
 

@@ -11,9 +11,11 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
+from damaged_store import damage_evaluations, store_with_a_campaign
 from worldagent.commands.console import friendly_errors
 from worldagent.errors import WorldagentError
-from worldagent.store import SCHEMA_VERSION, RunStore, sqlite_kind
+from worldagent.sqlite_errors import sqlite_kind
+from worldagent.store import SCHEMA_VERSION, RunStore
 
 
 class Cells:
@@ -21,13 +23,6 @@ class Cells:
 
     def __init__(self, cells):
         self.cells = cells
-
-
-def store_with_a_campaign(folder):
-    with RunStore(folder) as store:
-        campaign = store.open_campaign("c", "racing", "return", False, "random", 4, 0, {}, resume=False)
-        store.add(campaign, 0, 0, np.zeros(2), 1.0, [{"return": 1.0}], 0.0)
-    return folder / "store.sqlite"
 
 
 def test_a_full_disk_while_adding_is_one_line_and_keeps_what_was_committed(tmp_path):
@@ -64,14 +59,7 @@ def test_a_store_in_a_read_only_folder_is_one_line(tmp_path):
 
 
 def test_a_damaged_store_is_one_line_wherever_the_damage_is_read(tmp_path):
-    path = store_with_a_campaign(tmp_path)
-    db = sqlite3.connect(path)
-    page_size = db.execute("PRAGMA page_size").fetchone()[0]
-    root = db.execute("SELECT rootpage FROM sqlite_master WHERE name = 'evaluations'").fetchone()[0]
-    db.close()
-    with open(path, "r+b") as handle:
-        handle.seek((root - 1) * page_size)
-        handle.write(b"\x07" * page_size)
+    damage_evaluations(store_with_a_campaign(tmp_path))
     with RunStore(tmp_path) as store:  # the schema pages are whole: the damage shows only when evaluations are read
         with pytest.raises(WorldagentError, match=r"is damaged \(.*malformed.*\); restore it from a copy or choose another --out") as caught:
             store.evaluations("c")

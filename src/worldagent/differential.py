@@ -52,11 +52,12 @@ from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
 from worldagent.evaluation.local import evaluate
+from worldagent.identity import agent_identity
 from worldagent.progress import progress_bar
 from worldagent.search.campaign import CampaignSpec, Outcome, campaign_stream, run_campaign, stored_seed
 from worldagent.search.objectives import episode_records, generate
 from worldagent.search.optimisers import OptimiserConfig
-from worldagent.store import Evaluation, RunStore, agent_identity
+from worldagent.store import Evaluation, RunStore
 
 SET_BATCH = 64  # worlds of a world set evaluated (and committed) at a time
 SEARCHES = ("cmaes", "atlas")
@@ -292,7 +293,7 @@ def require_generator(setup: DiffSetup) -> None:
 
 
 def check_agents(store: RunStore, name: str, setup: DiffSetup) -> None:
-    """A paired campaign already in the store must have compared the same two agents (``store.agent_identity``:
+    """A paired campaign already in the store must have compared the same two agents (``identity.agent_identity``:
     by content, a callable by its function too); else one line, before anything runs."""
     existing = store.campaign(name)
     if existing is None:

@@ -26,9 +26,7 @@ pickle), ``episodes`` JSON: a list, one dict of metrics per episode.
 from __future__ import annotations
 
 import csv
-import functools
 import hashlib
-import inspect
 import io
 import json
 import os
@@ -44,6 +42,8 @@ import numpy as np
 
 from worldagent.errors import WorldagentError
 from worldagent.files import can_create_files_in
+from worldagent.identity import resumable_parts
+from worldagent.sqlite_errors import one_line_sqlite_errors, sqlite_failure, sqlite_kind, use_wal
 
 SCHEMA_VERSION = 1
 STORE_FILE = "store.sqlite"
@@ -161,113 +161,7 @@ def decode_world(blob: bytes) -> dict[str, np.ndarray]:
         return {name: data[name] for name in data.files}
 
 
-def _use_wal(db: sqlite3.Connection, patience: float = 30.0) -> None:
-    """Switch to WAL, retrying: SQLite answers "locked" without waiting when two connections
-    switch a new file at once (the busy timeout does not cover that step)."""
-    deadline = time.monotonic() + patience
-    while True:
-        try:
-            db.execute("PRAGMA journal_mode=WAL")
-            return
-        except sqlite3.OperationalError as error:
-            if "locked" not in str(error) or time.monotonic() > deadline:
-                raise
-            time.sleep(0.01)
-
-
-def sqlite_kind(error: sqlite3.Error) -> str:
-    """What went wrong, from SQLite's own error code (its message where Python gives none): "locked",
-    "full", "read-only", "damaged", "io", or "" (anything else: a bug, whose traceback is wanted)."""
-    name = getattr(error, "sqlite_errorname", "") or ""
-    text = str(error).lower()
-    kinds = (
-        ("locked", ("SQLITE_BUSY", "SQLITE_LOCKED"), ("locked", "busy")),
-        ("full", ("SQLITE_FULL",), ("disk is full", "database or disk is full")),
-        ("read-only", ("SQLITE_READONLY", "SQLITE_CANTOPEN", "SQLITE_PERM", "SQLITE_AUTH"), ("readonly", "read-only", "unable to open")),
-        ("damaged", ("SQLITE_CORRUPT", "SQLITE_NOTADB"), ("malformed", "not a database", "corrupt")),
-        ("io", ("SQLITE_IOERR",), ("disk i/o error",)),
-    )
-    for kind, codes, words in kinds:
-        if name.startswith(codes) or any(word in text for word in words):
-            return kind
-    return ""
-
-
-def sqlite_failure(error: sqlite3.Error, path: Path) -> WorldagentError | None:
-    """The one line naming the fix for a SQLite failure on the store at ``path`` (``sqlite_kind``), or None for a bug."""
-    fixes = {
-        "locked": "stayed locked by another process writing to it (another worldagent command on the same --out?); "
-        "wait for it to finish, or pass another --out",
-        "full": "cannot be written: the disk is full; free some space (or pass an --out on another disk) and run the same command "
-        "again (every evaluation committed before is kept, and the rerun resumes)",
-        "read-only": f"cannot be written ({error}): SQLite writes the store and files beside it in {path.parent}; make both writable, "
-        "or copy the run directory somewhere writable and pass the copy",
-        "damaged": f"is damaged ({error}); restore it from a copy or choose another --out",
-        "io": f"could not be read or written ({error}: the disk or its mount failed); check the disk, then run the same command again",
-    }
-    kind = sqlite_kind(error)
-    return WorldagentError(f"the run store {path} {fixes[kind]}.") if kind else None
-
-
-def _one_line_sqlite_errors(cls):
-    """Class decorator: a SQLite failure in any public method of ``cls`` (a generator's too) is raised as ``sqlite_failure``'s
-    ``WorldagentError``: the store is the one boundary where SQLite's errors become one line naming the fix."""
-
-    def guarded(method):
-        if inspect.isgeneratorfunction(method):
-
-            @functools.wraps(method)
-            def generator(self, *args, **kwargs):
-                try:
-                    yield from method(self, *args, **kwargs)
-                except sqlite3.Error as error:
-                    raise (sqlite_failure(error, self.path) or error) from None
-
-            return generator
-
-        @functools.wraps(method)
-        def wrapper(self, *args, **kwargs):
-            try:
-                return method(self, *args, **kwargs)
-            except sqlite3.Error as error:
-                raise (sqlite_failure(error, self.path) or error) from None
-
-        return wrapper
-
-    for name, method in list(vars(cls).items()):
-        if inspect.isfunction(method) and not name.startswith("_"):
-            setattr(cls, name, guarded(method))
-    return cls
-
-
-def agent_identity(record: dict) -> list:
-    """What makes two agent records (``agents.policy.agent_record``) the same agent (DESIGN.md "Identity"): the
-    kind and the hash of its files, not where they are now; a callable's function name beside its module's
-    hash (two functions of one module are two agents); agents without files by their name."""
-    kind, path, sha256 = record.get("kind"), record.get("path") or "", record.get("sha256")
-    if kind == "callable":
-        return [kind, path.partition(":")[2], sha256 or path]
-    if kind == "python":  # built in Python: its name and its parameters' hash
-        return [kind, path, sha256]
-    return [kind, sha256 or path]
-
-
-def _resumable(have: dict, wanted: dict) -> tuple[dict, dict]:
-    """The parts of two campaign configs that must agree to resume: the agent by its identity
-    (``agents.policy.agent_identity``: content, not where its files are now); stores from before
-    agents (or episode streams) were recorded, without them."""
-    if "stream" not in have:  # stored before campaigns had their own episode streams: resumed on the old rule
-        wanted = {k: v for k, v in wanted.items() if k != "stream"}
-    if "agent" not in have:
-        return have, {k: v for k, v in wanted.items() if k != "agent"}
-    before, after = have.get("agent") or {}, wanted.get("agent") or {}
-    if before.get("kind") == after.get("kind") == "python" and not before.get("sha256"):  # recorded before parameters were hashed
-        wanted = {**wanted, "agent": {**after, "sha256": None}}
-    same = lambda agent: agent and agent_identity(agent)  # noqa: E731
-    return {**have, "agent": same(have.get("agent"))}, {**wanted, "agent": same(wanted.get("agent"))}
-
-
-@_one_line_sqlite_errors
+@one_line_sqlite_errors
 class RunStore:
     """A SQLite run store (see the module docstring). Use as a context manager or ``close()``. Every SQLite failure
     (a locked store, a full disk, a read-only or damaged file) is a one-line ``WorldagentError`` naming the fix."""
@@ -283,7 +177,7 @@ class RunStore:
         try:
             self.db = sqlite3.connect(path, timeout=BUSY_SECONDS, isolation_level=None)
             self.db.execute(f"PRAGMA busy_timeout={int(BUSY_SECONDS * 1000)}")
-            _use_wal(self.db)
+            use_wal(self.db)
             if not self._tables():
                 if not create:
                     raise WorldagentError(f"{path} is an empty file, not a run store; run a campaign there first.")
@@ -418,7 +312,7 @@ class RunStore:
             config=existing.config,
         )
         wanted = json.loads(json.dumps(wanted, sort_keys=True))
-        have["config"], wanted["config"] = _resumable(have["config"], wanted["config"])
+        have["config"], wanted["config"] = resumable_parts(have["config"], wanted["config"])
         if have != wanted:
             differing = sorted(k for k in have if have[k] != wanted[k])
             raise WorldagentError(f"campaign {name!r} was started with other settings ({', '.join(differing)}); resume it with the same ones.")

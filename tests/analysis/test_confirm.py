@@ -17,10 +17,11 @@ from worldagent.analysis.confirm import (
     mean_interval,
 )
 from worldagent.events import parse_selection
+from worldagent.identity import agent_identity
 from worldagent.search.campaign import CampaignSpec, Outcome, evaluation_seed, run_campaign, stored_seed
 from worldagent.search.objectives import search_keys
 from worldagent.search.optimisers import OptimiserConfig
-from worldagent.store import RunStore, agent_identity
+from worldagent.store import RunStore
 
 SMALL = OptimiserConfig(popsize=6, random_batch=6)
 

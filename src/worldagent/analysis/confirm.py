@@ -35,8 +35,9 @@ from scipy import stats
 
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
+from worldagent.identity import agent_identity
 from worldagent.progress import progress_bar
-from worldagent.store import Confirmation, Evaluation, RunStore, Selected, agent_identity, world_digest
+from worldagent.store import Confirmation, Evaluation, RunStore, Selected, world_digest
 
 CONFIRM_TAG = 0x434F4E46  # "CONF"
 REPEATS = 64  # fresh episodes for each of the few worlds a search reports
@@ -57,7 +58,7 @@ def confirmation_keys(seed: int, repeats: int) -> jax.Array:
 
 
 def agent_key(setup: Any) -> str:
-    """What a confirmation's agent is: its identity by content (``store.agent_identity``), its name (greedy or
+    """What a confirmation's agent is: its identity by content (``identity.agent_identity``), its name (greedy or
     not) and the env options it plays with."""
     from worldagent.agents.policy import agent_record
 

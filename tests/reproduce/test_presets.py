@@ -85,6 +85,9 @@ def test_bad_names_and_budgets_are_refused_in_one_line():
         resolve_envs("chess", TINY)
     assert resolve_envs("all", TINY) == list(TINY.envs) and resolve_envs("harvest", TINY) == ["harvest"]  # all: with installed plugins
     assert list(TINY.envs)[:2] == ["racing", "harvest"]
+    assert resolve_envs("harvest, racing,harvest", TINY) == ["harvest", "racing"]  # several, in the order named, once each
+    with pytest.raises(WorldagentError, match="unknown environment 'chess'"):
+        resolve_envs("racing,chess", TINY)
 
 
 def test_restarting_a_phase_restarts_what_is_computed_from_it():

@@ -50,7 +50,7 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def reproduce(
         preset: str = typer.Option("quick", "--preset", help="quick (under 10 min on 2 CPU cores), paper (the paper's budgets; a GPU) or tiny (CI)."),
-        env: str = typer.Option("all", "--env", help=f"all, or one of: {', '.join(registry.names())}."),
+        env: str = typer.Option("all", "--env", help=f"all, or one or more (comma-separated) of: {', '.join(registry.names())}."),
         out: Path = typer.Option(None, "--out", help="Run directory (default runs/PRESET); a rerun skips finished phases, a killed run resumes."),
         algo: str = typer.Option(
             None,
@@ -91,6 +91,12 @@ def register(app: typer.Typer) -> None:
         ),
         show: bool = typer.Option(False, "--show", help="Print the preset's config and exit."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars (status lines only)."),
+        sequential: bool = typer.Option(
+            False,
+            "--sequential",
+            help="Run the environments one after another in this process (default on a CPU: each in a process of its own, "
+            "as many at once as there are cores; also WORLDAGENT_SEQUENTIAL_ENVS=1).",
+        ),
     ) -> None:
         """Run the paper end to end: datasets, generators, agents, random and strategic evaluation, ES vs BO, influencing; then the HTML report."""
         from worldagent.agents.algorithms import parse_settings
@@ -111,7 +117,7 @@ def register(app: typer.Typer) -> None:
             return
         out = out or Path("runs") / chosen.name
         check_reproduce_dir(out, envs, restart_closure(restart, adaptive(chosen, envs)))
-        manifest = run(chosen, out, envs, restart=restart, progress=not quiet, echo=status_line)
+        manifest = run(chosen, out, envs, restart=restart, progress=not quiet, echo=status_line, sequential=sequential)
         failed = [key for key, entry in manifest.data["phases"].items() if entry.get("status") == "failed"]
         if failed:
             console.print(f"[yellow]finished with failed phase(s): {', '.join(failed)} (see the report)[/yellow]")

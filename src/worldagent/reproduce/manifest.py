@@ -10,7 +10,10 @@ seed, package versions, the device, and per phase (``"<env>/agent"``, ..., ``"re
     started, finished, wall_s, outputs, error
 
 It is rewritten atomically after every change of a phase, so a killed run leaves a manifest
-saying which phase was running; the next run skips the phases marked "done" and runs the
+saying which phase was running. Each environment's phases may run in a process of their own
+(``pipeline.envs_at_once``), all writing this one file: every change takes the lock file
+``.manifest.lock`` (``fcntl.flock``), reads the file again, applies only its own key's change and
+writes the whole atomically, so no process loses another's phases; the next run skips the phases marked "done" and runs the
 others again, each resuming from its own checkpoint or store. A "done" phase whose recorded
 config differs from the preset's is refused (never silently reused): the fix is
 ``--restart PHASE`` or another run directory.
@@ -20,6 +23,8 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +33,34 @@ from worldagent.files import write_text
 from worldagent.provenance import device, versions
 from worldagent.runs import MANIFEST_FILE, parse_manifest, read_manifest
 from worldagent.runs import MANIFEST_FORMAT as FORMAT_VERSION
+
+try:
+    import fcntl
+except ImportError:  # Windows: no flock; the pipeline then runs its environments one after another
+    fcntl = None
+
+
+LOCK_FILE = ".manifest.lock"  # beside manifest.json; hidden, so listings of a run directory skip it
+
+
+def can_share() -> bool:
+    """Whether processes can share one manifest (the platform has ``fcntl.flock``)."""
+    return fcntl is not None
+
+
+@contextmanager
+def manifest_lock(run_dir: Path) -> Iterator[None]:
+    """Hold the run directory's manifest lock (exclusive, across processes) for one read-change-write."""
+    if fcntl is None:
+        yield
+        return
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with open(run_dir / LOCK_FILE, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def phase_key(env: str | None, phase: str) -> str:
@@ -63,17 +96,33 @@ class Manifest:
         return cls(Path(run_dir), read_manifest(run_dir))
 
     def save(self) -> Path:
+        """Write the manifest as it is in memory (atomically); changes go through ``_change``, which merges."""
         self.data["updated"] = time.time()
         return write_text(self.run_dir / MANIFEST_FILE, json.dumps(self.data, indent=1, default=_json_default))
+
+    def _change(self, change: Callable[[dict], Any]) -> Any:
+        """Apply ``change`` to the manifest as it is on disk now, under the lock, and write it: another
+        process's phases, written since this one read the file, are kept. Returns what ``change`` returns."""
+        with manifest_lock(self.run_dir):
+            path = self.run_dir / MANIFEST_FILE
+            if path.exists():
+                self.data = parse_manifest(path)
+            result = change(self.data)
+            self.save()
+        return result
 
     # -- the run ------------------------------------------------------------------------------
 
     def begin_run(self, preset_name: str, config: dict, envs: list[str]) -> None:
         """Record the preset, seeds, versions and device of this invocation."""
-        self.data.update(preset=preset_name, config=config, seed=config.get("seed"), versions=versions(), device=device())
-        self.data["envs"] = list(dict.fromkeys([*self.data.get("envs", []), *envs]))  # earlier runs' first, in order
-        self.data.setdefault("runs", []).append({"started": time.time(), "preset": preset_name, "envs": envs})
-        self.save()
+        about = dict(preset=preset_name, config=config, seed=config.get("seed"), versions=versions(), device=device())
+
+        def change(data: dict) -> None:
+            data.update(about)
+            data["envs"] = list(dict.fromkeys([*data.get("envs", []), *envs]))  # earlier runs' first, in order
+            data.setdefault("runs", []).append({"started": time.time(), "preset": preset_name, "envs": envs})
+
+        self._change(change)
 
     # -- phases -------------------------------------------------------------------------------
 
@@ -98,35 +147,31 @@ class Manifest:
 
     def start(self, key: str, config: dict, about: dict | None = None) -> None:
         """Record ``key`` as running with ``config`` (what a resume compares) and ``about`` (what the report reads)."""
-        self.data["phases"][key] = {"status": "running", "config": _normalise(config), **(about or {}), "started": time.time()}
-        self.save()
+        entry = {"status": "running", "config": _normalise(config), **(about or {}), "started": time.time()}
+        self._change(lambda data: data["phases"].__setitem__(key, entry))
 
     def annotate(self, key: str, about: dict | None) -> None:
         """Add ``about`` to a phase recorded before it was kept (its config matched, so it describes the phase)."""
         entry = self.data["phases"][key]
         if about and any(entry.get(name) != value for name, value in about.items()):
-            entry.update(about)
-            self.save()
+            self._change(lambda data: data["phases"][key].update(about))
 
     def finish(self, key: str, outputs: dict) -> dict:
-        entry = self.data["phases"][key]
-        entry.update(status="done", finished=time.time(), outputs=outputs, error=None)
-        entry["wall_s"] = round(entry["finished"] - entry["started"], 2)
-        self.save()
-        return entry
+        return self._change(lambda data: _ended(data["phases"][key], status="done", outputs=outputs, error=None))
 
     def fail(self, key: str, error: BaseException) -> dict:
-        entry = self.data["phases"][key]
-        entry.update(status="failed", finished=time.time(), error=f"{type(error).__name__}: {error}")
-        entry["wall_s"] = round(entry["finished"] - entry["started"], 2)
-        self.save()
-        return entry
+        return self._change(lambda data: _ended(data["phases"][key], status="failed", error=f"{type(error).__name__}: {error}"))
 
     def forget(self, keys: list[str]) -> None:
         """Drop phases (``--restart``): they run again from scratch."""
-        for key in keys:
-            self.data["phases"].pop(key, None)
-        self.save()
+        self._change(lambda data: [data["phases"].pop(key, None) for key in keys])
+
+
+def _ended(entry: dict, **fields: Any) -> dict:
+    """``entry`` of a phase that stopped (done or failed): ``fields``, when, and its wall time."""
+    entry.update(finished=time.time(), **fields)
+    entry["wall_s"] = round(entry["finished"] - entry["started"], 2)
+    return entry
 
 
 def _normalise(config: dict) -> dict:

@@ -183,8 +183,8 @@ def test_jit_and_vmap_agree_with_one_call(random_repaired):
 
 def test_from_dataset_settings_and_config(harvest_data):
     default = OpenRooms.from_dataset(harvest_data)
-    assert default.apples == median_apples(harvest_data.worlds)
-    assert default.config == {"apples": default.apples, "rounds": 1, "entrances": "posterior"}
+    assert default.config == {"apples": "clusters", "rounds": 1, "entrances": "posterior"}  # as the generator places them
+    assert OpenRooms.from_dataset(harvest_data, {"apples": median_apples(harvest_data.worlds)}).apples == median_apples(harvest_data.worlds)
     chosen = OpenRooms.from_dataset(harvest_data, {"apples": 12, "rounds": 2, "entrances": "likelihood"})
     assert OpenRooms.from_dataset(harvest_data, json.loads(json.dumps(chosen.config))) == chosen
     assert jax.eval_shape(chosen, jax.ShapeDtypeStruct((2, 2 * SIZE * SIZE), jnp.float32)).walls.shape == (2, SIZE, SIZE)

@@ -37,8 +37,11 @@ the nearest dataset layout's likelihood on 98% (with ``entrances="likelihood"``)
 layouts are not in the dataset, and a map takes about 8 ms on a CPU core
 (``benchmarks/harvest_open_repair.py``).
 
-Apples as ``HarvestRepair``'s (``repair.place_apples``): exactly K on the free cells with the
-highest apple logits, spawn corners free.
+Apples (``apples="clusters"``, the default since issue 48): as the generator places them, 1-3 round
+clusters in each of the layout's rooms (its merged regions' interiors and the space outside), read
+off the apple logits (``apples.cluster_apples``). ``apples=K`` (what generators saved before then
+record, so they decode as they did): as ``HarvestRepair``'s top-K rule (``repair.place_apples``),
+exactly K on the free cells with the highest apple logits. Spawn corners are free either way.
 """
 
 from __future__ import annotations
@@ -50,8 +53,9 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from worldagent.envs.harvest.apples import CLUSTERS, cluster_apples
 from worldagent.envs.harvest.maps import NUM_CORNERS, MapConfig, corner_bounds, entrance_candidates, region_walls
-from worldagent.envs.harvest.repair import LOGIT_CLIP, median_apples, place_apples
+from worldagent.envs.harvest.repair import LOGIT_CLIP, apple_setting, corner_mask, place_apples
 from worldagent.envs.harvest.world import HarvestMap
 from worldagent.errors import WorldagentError
 
@@ -253,11 +257,17 @@ def choose_rooms(wall_logit: jax.Array, rounds: int = DEFAULT_ROUNDS, posterior:
     return finals[jnp.argmax(layout_scores(wall_logit, finals, posterior))]
 
 
-def open_map(logits: jax.Array, apples: int, rounds: int = DEFAULT_ROUNDS, posterior: bool = True) -> HarvestMap:
-    """One valid map from logits f32[2, S, S]: the generator layout the wall logits find most probable, K apples."""
+def open_map(logits: jax.Array, apples: int | str, rounds: int = DEFAULT_ROUNDS, posterior: bool = True) -> HarvestMap:
+    """One valid map from logits f32[2, S, S]: the generator layout the wall logits find most probable, its
+    apples in clusters (``apples="clusters"``) or on the K free cells with the highest logits (``apples=K``)."""
     wall_logit, apple_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP), jnp.clip(logits[1], -LOGIT_CLIP, LOGIT_CLIP)
-    walls = layout_walls(wall_logit, choose_rooms(wall_logit, rounds, posterior), posterior)
-    return place_apples(walls, wall_logit, apple_logit, apples)
+    size = wall_logit.shape[0]
+    group_masks, closed = region_walls(*rooms_of(choose_rooms(wall_logit, rounds, posterior), size), size)
+    walls = closed & ~carve_best_entrances(wall_logit, closed, group_masks, posterior)
+    if apples != CLUSTERS:
+        return place_apples(walls, wall_logit, apple_logit, apples)
+    rooms = jnp.concatenate([group_masks & ~closed[None], ~group_masks.any(axis=0)[None]])  # the generator's rooms (maps.generate_map)
+    return HarvestMap(walls=walls & ~jnp.asarray(corner_mask(size, size)), apples=cluster_apples(rooms, apple_logit))
 
 
 def _count(name: str, value, low: int, high: int, hint: str) -> int:
@@ -268,16 +278,16 @@ def _count(name: str, value, low: int, high: int, hint: str) -> int:
 
 @struct.dataclass
 class OpenRooms:
-    """New valid walls: the generator layout the decoder finds most probable (closed rooms kept), exactly K apples.
+    """New valid walls: the generator layout the decoder finds most probable (closed rooms kept), apples in clusters.
 
     Attributes:
-        apples: K, the apple count of every generated map (static).
+        apples: ``"clusters"`` (as the generator places them) or K, the apple count of every map (static).
         rounds: block-coordinate passes over the four sides from each start (static).
         entrances: "posterior" (default) or "likelihood", the entrance rule (``carve_best_entrances``, static).
         grid: (S, S) of the maps (static).
     """
 
-    apples: int = struct.field(pytree_node=False)
+    apples: int | str = struct.field(pytree_node=False)
     rounds: int = struct.field(pytree_node=False)
     entrances: str = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
@@ -286,21 +296,23 @@ class OpenRooms:
     def from_dataset(cls, dataset, config=None) -> OpenRooms:
         """The repair for maps like ``dataset``'s (a harvest ``WorldDataset``).
 
-        ``config``: ``apples`` K (default: the dataset's median count); ``rounds`` (default 1);
-        ``entrances`` "posterior" (default) or "likelihood".
+        ``config``: ``apples`` "clusters" (default: as the generator places them) or K (exactly K on the
+        cells with the highest apple logits); ``rounds`` (default 1); ``entrances`` "posterior" (default)
+        or "likelihood".
         """
         config = dict(config or {})
         unknown = set(config) - set(SETTINGS)
         if unknown:
             raise WorldagentError(
-                f"unknown setting(s) {sorted(unknown)} of harvest's open repair; use apples=K, rounds=N and entrances=posterior|likelihood."
+                f"unknown setting(s) {sorted(unknown)} of harvest's open repair; use apples=clusters|K, rounds=N and entrances=posterior|likelihood."
             )
         grid = tuple(int(s) for s in dataset.cell_shape[1:])
         if grid[0] != grid[1] or grid[0] < 10:  # the generator's rooms are 5 to side - 5 cells
             raise WorldagentError(f"harvest's open repair needs square maps of side 10 or more, as the generator makes; got {grid}.")
-        free = int(np.prod(grid)) - 4
-        apples = config["apples"] if config.get("apples") is not None else median_apples(dataset.worlds)
-        apples = _count("apples", apples, 1, free, "the non-corner cells of the map")
+        try:
+            apples = apple_setting(CLUSTERS if config.get("apples") is None else config["apples"], grid, dataset.worlds)
+        except ValueError as error:
+            raise WorldagentError(f"apples={config['apples']!r}: {error}.") from None
         rounds = _count("rounds", config.get("rounds", DEFAULT_ROUNDS), 1, MAX_ROUNDS, f"default {DEFAULT_ROUNDS}")
         entrances = config.get("entrances", ENTRANCE_RULES[0])
         if entrances not in ENTRANCE_RULES:

@@ -10,10 +10,12 @@ often in G(z) as the decoder's wall signal allows. Measured with ``worldagent ge
 (``structure.tagger_separated``); numbers in ``docs/harvest.md``. Snapping is closed: G(z) returns
 dataset layouts only; ``open_repair.OpenRooms`` returns new layouts the generator could make.
 
-Apples. Exactly K apples on the K free cells with the highest apple logits (the paper keeps the
-number of resources the same across worlds); the spawn corners are always free. If fewer than K
-non-corner cells are free, the walls with the lowest logits are cleared to make room, so any
-input yields a valid map.
+Apples. By default exactly K apples on the K free cells with the highest apple logits (the paper
+keeps the number of resources the same across worlds); the spawn corners are always free. If fewer
+than K non-corner cells are free, the walls with the lowest logits are cleared to make room, so any
+input yields a valid map. ``apples="clusters"`` places them as the procedural generator does instead
+(``apples.cluster_apples``: 1-3 round clusters per room, read off the apple logits; the rooms of
+the wall layout from ``apples.rooms_from_walls``), so the count varies as fresh maps' does.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from worldagent.envs.harvest.apples import CLUSTERS, cluster_apples, rooms_from_walls
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
 from worldagent.envs.repairs import nearest_index
 from worldagent.errors import WorldagentError
@@ -39,12 +42,12 @@ def corner_mask(height: int, width: int) -> np.ndarray:
     return mask
 
 
-def repair_maps(logits: jax.Array, apples: int, layouts: jax.Array | None = None) -> HarvestMap:
-    """Valid maps with exactly ``apples`` apples and free spawn corners from decoded logits.
+def repair_maps(logits: jax.Array, apples: int | str, layouts: jax.Array | None = None) -> HarvestMap:
+    """Valid maps with ``apples`` apples and free spawn corners from decoded logits.
 
     Args:
         logits: f32[2, H, W] (or [B, 2, H, W]) wall and apple logits.
-        apples: K, the number of apples every map gets.
+        apples: K, the number of apples every map gets, or ``"clusters"`` (``apples.cluster_apples``).
         layouts: f32[L, H·W] 0/1 wall layouts to snap the walls to (the most probable one under
             the wall logits); None: walls where the wall logit is positive.
 
@@ -59,6 +62,9 @@ def repair_maps(logits: jax.Array, apples: int, layouts: jax.Array | None = None
         walls = wall_logit > 0
     else:
         walls = layouts[nearest_index(wall_logit.reshape(1, -1), layouts)[0]].reshape(height, width) > 0.5
+    if apples == CLUSTERS:
+        walls = walls & ~jnp.asarray(corner_mask(height, width))
+        return HarvestMap(walls=walls, apples=cluster_apples(rooms_from_walls(walls), apple_logit))
     return place_apples(walls, wall_logit, apple_logit, apples)
 
 
@@ -86,6 +92,20 @@ def place_apples(walls: jax.Array, wall_logit: jax.Array, apple_logit: jax.Array
     return HarvestMap(walls=walls & ~apple_cells, apples=apple_cells)
 
 
+def apple_setting(value, grid: tuple[int, int], worlds: HarvestMap) -> int | str:
+    """The ``apples`` setting of a harvest repair, checked: ``"clusters"``, or K from 1 to the non-corner
+    cells (None: the median count of ``worlds``, the dataset's)."""
+    if value == CLUSTERS:
+        return CLUSTERS
+    count = median_apples(worlds) if value is None else value
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
+        raise ValueError(f"apples is a count K or {CLUSTERS!r} (as the generator places them)")  # make_repair names the setting
+    free = int(np.prod(grid)) - 4
+    if not 1 <= count <= free:
+        raise WorldagentError(f"apples={count}; pick between 1 and {free} (the non-corner cells of the map), or {CLUSTERS}.")
+    return int(count)
+
+
 def threshold_maps(logits) -> HarvestMap:
     """The unrepaired decode: walls and apples where their logits are positive ([B, 2, H, W])."""
     logits = np.asarray(logits)
@@ -110,35 +130,33 @@ class HarvestRepair:
 
     Attributes:
         layouts: f32[L, H·W] the dataset's distinct wall layouts (``walls="nearest"``), or None.
-        apples: K, the apple count of every generated map (static).
+        apples: K, the apple count of every generated map, or ``"clusters"`` (static).
         grid: (H, W) of the maps (static).
     """
 
     layouts: jax.Array | None
-    apples: int = struct.field(pytree_node=False)
+    apples: int | str = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> HarvestRepair:
         """The repair for maps like ``dataset``'s.
 
-        ``config``: ``apples`` K (default: the dataset's median count); ``walls`` "nearest"
-        (default: the dataset layout the decoder finds most probable) or "threshold".
+        ``config``: ``apples`` K (default: the dataset's median count) or "clusters" (as the generator
+        places them); ``walls`` "nearest" (default: the dataset layout the decoder finds most probable)
+        or "threshold".
         """
         config = dict(config or {})
         unknown = set(config) - {"apples", "walls"}
         if unknown:
-            raise WorldagentError(f"unknown harvest repair setting(s) {sorted(unknown)}; use apples=K and walls=nearest|threshold.")
+            raise WorldagentError(f"unknown harvest repair setting(s) {sorted(unknown)}; use apples=K|clusters and walls=nearest|threshold.")
         grid = tuple(int(s) for s in dataset.cell_shape[1:])
-        count = config.get("apples") or median_apples(dataset.worlds)
-        free = int(np.prod(grid)) - 4
-        if not 1 <= int(count) <= free:
-            raise WorldagentError(f"apples={count}; pick between 1 and {free} (the non-corner cells of the map).")
+        count = apple_setting(config.get("apples") or None, grid, dataset.worlds)  # 0 in old generator.json files: the default
         rule = config.get("walls", "nearest")
         if rule not in WALL_RULES:
             raise WorldagentError(f"walls={rule!r}; pick one of {', '.join(WALL_RULES)}.")
         layouts = jnp.asarray(wall_layouts(dataset.worlds)) if rule == "nearest" else None
-        return cls(layouts, int(count), grid)
+        return cls(layouts, count, grid)
 
     @property
     def config(self) -> dict:

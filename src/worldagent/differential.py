@@ -57,6 +57,7 @@ from worldagent.progress import progress_bar
 from worldagent.search.campaign import CampaignSpec, Outcome, campaign_stream, run_campaign, stored_seed
 from worldagent.search.objectives import episode_records, generate
 from worldagent.search.optimisers import OptimiserConfig
+from worldagent.search.prior import TYPICAL, prior_summary
 from worldagent.store import Evaluation, RunStore
 
 SET_BATCH = 64  # worlds of a world set evaluated (and committed) at a time
@@ -373,9 +374,11 @@ def differential_search(
     descriptors: list[str] | None = None,
     cells: int = 10,
     progress: bool = True,
+    prior_bound: float | str | None = TYPICAL,
 ) -> tuple[list[Evaluation], str]:
     """Search z for the worlds where metric(B) − metric(A) is lowest (``maximize``: highest): CMA-ES,
-    or the atlas (CMA-ME over ``descriptors``, default the env's), with common random numbers.
+    or the atlas (CMA-ME over ``descriptors``, default the env's), with common random numbers; within the
+    prior's typical set unless ``prior_bound`` says otherwise (``CampaignSpec.prior_bound``).
 
     Returns:
         (its evaluations in order, the campaign's name ``search_campaign_name``); a rerun resumes it.
@@ -394,7 +397,7 @@ def differential_search(
         extra, kind = {**extra, **grid}, "cma-me"
     spec = CampaignSpec(
         name, setup.spec.name, metric, maximize, kind, int(budget), int(seed), setup.generator.latent_dim,
-        agent=agent_record(setup.b.policy), extra=extra,
+        agent=agent_record(setup.b.policy), extra=extra, prior_bound=prior_bound,
     )  # fmt: skip
     objective = PairedObjective(setup, metric)
     title = f"{search} {'max' if maximize else 'min'}imising {metric}(B) − {metric}(A)"
@@ -523,6 +526,7 @@ def diff(
     seed: int = 0,
     progress: bool = True,
     confirm: int = REPEATS,
+    prior_bound: float | str | None = TYPICAL,
 ) -> dict:
     """Compare A and B on a world set and/or search for where B is worse; everything ``worldagent diff`` reports.
 
@@ -531,7 +535,8 @@ def diff(
         setup: the two agents (``diff_setup``).
         worlds: a count of worlds G(z), z ~ N(0, I), a ``WorldSet``, or None (search only).
         search: "cmaes", "atlas" or None; ``budget`` its worlds, ``objective`` its metric,
-            ``maximize`` its direction on metric(B) − metric(A), ``descriptors``/``cells`` the atlas's grid.
+            ``maximize`` its direction on metric(B) − metric(A), ``descriptors``/``cells`` the atlas's grid,
+            ``prior_bound`` where it may go (default the prior's typical set).
         failure: which worlds fail (the event language; default the env's ``failure``).
         metric: the α-CVaR's metric (higher is better; default the main one).
         gate: an ``analysis.gate.Gate`` checked on the result (None: none).
@@ -542,7 +547,8 @@ def diff(
     Returns:
         {"env", "agents" {"a", "b"}, "seed", "repeats", "source", "worlds": ``summarise`` with "confirmed" and "noise"
         (``world_noise``) or None,
-        "search": ``search_summary`` with "campaign" and "confirmed" or None, "episodes": all the comparison spent,
+        "search": ``search_summary`` with "campaign", "confirmed", "prior_bound" (the radius searched within, None:
+        beyond the prior) and the best world's "prior" (``search.prior.prior_summary``) or None, "episodes": all the comparison spent,
         "confirmation_episodes": those of the confirmations, "gate": its check or None}. The gate reads the paired
         statistics of the world set as they are (unbiased: every sampled world counts) and the search's confirmed figures.
     """
@@ -580,12 +586,16 @@ def diff(
             descriptors=descriptors,
             cells=cells,
             progress=progress,
+            prior_bound=prior_bound,
         )
         result["search"] = {
             "campaign": name,
             "search": search,
             **search_summary(searched, spec, selection, spec.metrics.resolve(objective), maximize, store=store),
+            "prior_bound": store.campaign(name).config.get("prior_bound"),
         }
+        best = next(e for e in searched if (e.generation, e.slot) == (result["search"]["best"]["generation"], result["search"]["best"]["slot"]))
+        result["search"]["best"]["prior"] = prior_summary(best.latent)
         result["search"]["confirmed"] = confirmed_search(
             store, setup, searched, result["search"], selection, repeats=confirm, seed=seed, progress=progress
         )

@@ -30,9 +30,10 @@ from worldagent.analysis.confirm import REPEATS as CONFIRM_REPEATS
 from worldagent.envs import registry
 from worldagent.envs.registry import EnvSpec
 from worldagent.errors import WorldagentError
-from worldagent.search.campaign import CampaignSpec, best_evaluation, evaluation_seed, run_campaign, stored_seed
+from worldagent.search.campaign import CampaignSpec, best_evaluation, evaluation_seed, run_campaign, searched_where, stored_seed
 from worldagent.search.objectives import LatentObjective, Objective
 from worldagent.search.optimisers import OPTIMISERS, OptimiserConfig
+from worldagent.search.prior import TYPICAL
 from worldagent.store import Evaluation, RunStore
 
 RANDOM_BATCH = 250  # latents per round of a random evaluation
@@ -184,6 +185,7 @@ def search(
     resume: bool = False,
     progress: bool = True,
     config: OptimiserConfig | None = None,
+    prior_bound: float | str | None = TYPICAL,
 ) -> tuple[list[Evaluation], CampaignSpec]:
     """Run (or resume) one campaign of ``metric`` over G's latent space (paper §4.4).
 
@@ -198,6 +200,7 @@ def search(
         name: the campaign's name (default ``campaign_name(optimiser, maximize, metric, seed)``).
         resume: continue a campaign of that name (else an existing one is refused).
         config: optimiser settings; None: those the campaign was started with, else the defaults.
+        prior_bound: where the search may go (``CampaignSpec.prior_bound``; default the prior's typical set).
 
     Returns:
         (its evaluations in order, its ``CampaignSpec``).
@@ -209,7 +212,10 @@ def search(
     objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
     config = config or _stored_config(store, name) or OptimiserConfig()
     agent = agent_record(setup.policy)
-    spec = CampaignSpec(name, setup.spec.name, metric, maximize, optimiser, int(budget), int(seed), setup.generator.latent_dim, config, agent=agent)
+    spec = CampaignSpec(
+        name, setup.spec.name, metric, maximize, optimiser, int(budget), int(seed), setup.generator.latent_dim, config, agent=agent,
+        prior_bound=prior_bound,
+    )  # fmt: skip
     return run_campaign(store, spec, objective, resume=resume, progress=progress, backend=setup.backend), spec
 
 
@@ -283,6 +289,7 @@ def strategic_evaluation(
     resume: bool = True,
     config: OptimiserConfig | None = None,
     confirm: int = CONFIRM_REPEATS,
+    prior_bound: float | str | None = TYPICAL,
 ) -> dict:
     """Find the worlds that minimise and maximise ``metric`` (paper §6.1.2, Figure 6b), and confirm them.
 
@@ -297,12 +304,14 @@ def strategic_evaluation(
         optimiser: "cmaes" (the paper's), "bo" or "random".
         config: optimiser settings (default ``OptimiserConfig()``: CMA-ES population 21).
         confirm: fresh episodes per found world (0: none).
+        prior_bound: where both searches may go (``CampaignSpec.prior_bound``; default the prior's typical set).
 
     Returns:
         {"min": Evaluation, "max": Evaluation (both with their worlds), "campaigns": [name_min,
         name_max], "keys": (keys_min, keys_max), "metric": canonical name, "notes": (note_min,
         note_max), "confirmed": (ConfirmedWorld | None, ConfirmedWorld | None), "confirm": the
-        episodes per world, "selections": (name_min, name_max)}: the ``[repeats]`` episode keys each
+        episodes per world, "selections": (name_min, name_max), "searched": where each campaign looked
+        (``search.campaign.searched_where``)}: the ``[repeats]`` episode keys each
         world was scored with (to replay the scored episodes) and ``spec.episode_note`` of each ("", or
         e.g. ", 6/8 episodes crashed"); ``confirmed`` is (None, None) when ``confirm`` is 0.
     """
@@ -322,6 +331,7 @@ def strategic_evaluation(
             resume=resume,
             progress=progress,
             config=config,
+            prior_bound=prior_bound,
         )
         found[direction] = with_world(store, best(evaluations, maximize))
     keys = tuple(scored_keys_of(store, found[d]) for d in ("min", "max"))
@@ -340,6 +350,7 @@ def strategic_evaluation(
         "confirmed": confirmed,
         "confirm": int(confirm),
         "selections": selections,
+        "searched": tuple(searched_where(store.campaign(name)) for name in names),
     }
 
 
@@ -534,6 +545,7 @@ def atlas(
     resume: bool = True,
     progress: bool = True,
     confirm: int | None = None,
+    prior_bound: float | str | None = TYPICAL,
 ) -> dict:
     """A failure atlas: the worst (or best) world of every cell of a descriptor grid, by CMA-ME.
 
@@ -550,6 +562,7 @@ def atlas(
         name: the campaign (default ``atlas_campaign_name``); ``resume`` continues it.
         confirm: fresh episodes per elite (default ``analysis.confirm.ELITE_REPEATS``; 0 skips): every
             elite replayed on confirmation keys, giving the corrected archive (``search.atlas.confirm_elites``).
+        prior_bound: where the emitters may go (``CampaignSpec.prior_bound``; default the prior's typical set).
 
     Returns:
         ``atlas_summary`` of the campaign, with "confirmed": ``search.atlas.corrected_summary`` (None when skipped).
@@ -562,7 +575,10 @@ def atlas(
     selection = failure_selection(failure, setup.spec.name)
     name = name or atlas_campaign_name(maximize, metric, seed)
     dim = setup.generator.latent_dim
-    spec = CampaignSpec(name, setup.spec.name, metric, maximize, "cma-me", int(budget), int(seed), dim, agent=agent_record(setup.policy), extra=extra)
+    spec = CampaignSpec(
+        name, setup.spec.name, metric, maximize, "cma-me", int(budget), int(seed), dim, agent=agent_record(setup.policy), extra=extra,
+        prior_bound=prior_bound,
+    )  # fmt: skip
     objective = LatentObjective(Objective(setup.spec.name, metric, maximize), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
     run_campaign(store, spec, objective, resume=resume, progress=progress, backend=setup.backend, optimiser=optimiser)
     found = atlas_summary(store, optimiser.grid, optimiser.describe, [name], maximize, selection)[name]

@@ -23,6 +23,7 @@ from worldagent.commands.options import (
     ray_address_flag,
     stochastic_flag,
 )
+from worldagent.commands.strategic import check_prior_bound, prior_bound_flag
 
 CONFIRM_HELP = (
     "Fresh episodes on which every elite (the best world of each filled cell) is replayed, from keys no search draws "
@@ -86,8 +87,17 @@ def confirmed_metric(confirmed: dict) -> str:
     return reads[0] if reads else confirmed["metric"]
 
 
+def elites_prior(found: dict) -> dict:
+    """Where the found archive's elites (each filled cell's best world) lie under the prior (``search.prior.norms_summary``)."""
+    from worldagent.search.prior import norms_summary
+
+    evaluations = found["evaluations"]
+    return norms_summary([evaluations[i].latent for i in found["archive"].best])
+
+
 def atlas_json(found: dict) -> dict:
-    """What ``worldagent atlas`` writes beside its figure: the found archive's figures and the corrected one's."""
+    """What ``worldagent atlas`` writes beside its figure: the found archive's figures and the corrected one's, and
+    where its elites lie under the prior."""
     grid = found["grid"]
     return {
         "campaign": found["evaluations"][0].campaign,
@@ -101,6 +111,8 @@ def atlas_json(found: dict) -> dict:
             "distinct_failing_worlds": found["distinct_failing"],
         },
         "confirmed": found["confirmed"],
+        "elites_prior": elites_prior(found),
+        "searched": found.get("searched"),
     }
 
 
@@ -134,6 +146,7 @@ def register(app: typer.Typer) -> None:
         ray_address: str = ray_address_flag(),
         explain: bool = typer.Option(True, "--explain/--no-explain", help="With --failure: nearest passing worlds and failure groups."),
         confirm: int = typer.Option(None, "--confirm", help=CONFIRM_HELP),
+        prior: str = prior_bound_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bar."),
     ) -> None:
         """The worst (or best) world of every cell of a descriptor grid, found by CMA-ME, drawn as a heat map; every
@@ -141,10 +154,13 @@ def register(app: typer.Typer) -> None:
         from worldagent import experiments
         from worldagent.files import write_text
         from worldagent.reports.atlas import atlas_figure, counterfactual_figure
+        from worldagent.search.campaign import searched_where
+        from worldagent.search.prior import norms_text
         from worldagent.store import RunStore
 
         names = [n.strip() for n in descriptors.split(",")] if descriptors else None
         check_atlas_request(env, objective, budget, names, cells, failure, repeats, seed, out, confirm)
+        check_prior_bound(prior)
         setup = command_setup(
             env, agent, generator, option, stochastic=stochastic, repeats=repeats, backend_name=backend_name, ray_address=ray_address
         )
@@ -161,8 +177,10 @@ def register(app: typer.Typer) -> None:
                 failure=failure,
                 progress=not quiet,
                 confirm=confirm,
+                prior_bound=prior,
             )
             name = found["evaluations"][0].campaign
+            found["searched"] = searched_where(store.campaign(name))
             loaded = lambda e: (experiments.with_world(store, e), experiments.scored_keys_of(store, e))  # noqa: E731
             figure = atlas_figure(found, setup, setup.metric(objective), not minimize, loaded, out / f"{name}.png")
         grid = found["grid"]
@@ -174,6 +192,7 @@ def register(app: typer.Typer) -> None:
             f"coverage {found['coverage']:.2f}, QD-score {found['qd_score']:.4g} (found){failing} -> {figure}",
             markup=False,
         )
+        console.print(f"  elites under the prior: {norms_text(elites_prior(found))}; {found['searched']}", markup=False, highlight=False)
         for line in confirmed_lines(found["confirmed"], grid.descriptors):
             console.print(line, markup=False, highlight=False)
         summary = out / f"{name}.json"

@@ -26,6 +26,7 @@ from worldagent.commands.options import (
     ray_address_flag,
     stochastic_flag,
 )
+from worldagent.commands.strategic import check_prior_bound, prior_bound_flag
 from worldagent.errors import WorldagentError
 
 FAIL_IF_HELP = (
@@ -138,6 +139,7 @@ def register(app: typer.Typer) -> None:
         backend_name: str = typer.Option("local", "--backend", help="Where world batches are evaluated: local or ray (extra `ray`)."),
         ray_address: str = ray_address_flag(),
         confirm: int = typer.Option(None, "--confirm", help=CONFIRM_HELP),
+        prior: str = prior_bound_flag(),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
     ) -> None:
         """Which worlds got worse? A and B on the same worlds with the same episode keys: paired differences, P(failure),
@@ -151,6 +153,7 @@ def register(app: typer.Typer) -> None:
         source = world_source(worlds, campaign, store, dataset, search)
         args = (env, agent, generator, source, worlds, search, budget, objective, failure, metric, fail_if, names, cells, repeats, seed, out, confirm)
         gate = check_request(*args)
+        check_prior_bound(prior)
         setup = differential.diff_setup(
             env, agent[0], agent[1], generator, options=given_options(env, option), greedy=greedy, stochastic=stochastic,
             repeats=repeats, backend=backend(backend_name, ray_address),
@@ -161,7 +164,7 @@ def register(app: typer.Typer) -> None:
         with RunStore(out) as run_store:
             result = differential.diff(
                 run_store, setup, worlds=world_set, search=search, budget=budget, objective=objective, maximize=not minimize,
-                descriptors=names, cells=cells, failure=failure, metric=metric, gate=gate, seed=seed, progress=not quiet,
+                descriptors=names, cells=cells, failure=failure, metric=metric, gate=gate, seed=seed, progress=not quiet, prior_bound=prior,
                 **({} if confirm is None else {"confirm": confirm}),
             )  # fmt: skip
         result["generator"] = str(generator.resolve()) if generator else None  # `worldagent explore OUT` opens it

@@ -23,7 +23,7 @@ from worldagent.commands.options import (
     ray_address_flag,
     stochastic_flag,
 )
-from worldagent.commands.strategic import check_confirm, confirm_flag
+from worldagent.commands.strategic import check_confirm, check_prior_bound, confirm_flag, prior_bound_flag
 
 
 def register(app: typer.Typer) -> None:
@@ -41,6 +41,7 @@ def register(app: typer.Typer) -> None:
         budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate (rounded up to whole CMA-ES generations)."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         confirm: int = confirm_flag(),
+        prior: str = prior_bound_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the optimiser and of every episode."),
         out: Path = typer.Option(Path("runs/search"), "--out", help="Run directory; its store.sqlite may hold many campaigns."),
         name: str = typer.Option(None, "--name", help="Campaign name (default: optimiser-direction-objective-seed)."),
@@ -57,10 +58,13 @@ def register(app: typer.Typer) -> None:
 
         from worldagent import experiments
         from worldagent.reports.strategic import reported_line, winners_curse
+        from worldagent.search.campaign import searched_where
+        from worldagent.search.prior import prior_text
         from worldagent.store import RunStore
 
         check_counts(budget=budget, repeats=repeats)
         check_confirm(confirm)
+        check_prior_bound(prior)
         check_seed(seed)
         check_metric(env, objective)
         check_optimiser(optimiser)
@@ -80,8 +84,10 @@ def register(app: typer.Typer) -> None:
                 name=name,
                 resume=resume,
                 progress=not quiet,
+                prior_bound=prior,
             )
             best = experiments.best(evaluations, maximize=not minimize)
+            where = searched_where(store.campaign(spec.name))
             name = experiments.selection_name("search", spec.name)
             confirmed = experiments.confirm_reported(store, setup, best, name, repeats=confirm, seed=seed, progress=not quiet)
         scores = np.array([e.score for e in evaluations])
@@ -91,6 +97,7 @@ def register(app: typer.Typer) -> None:
             f"(generation {best.generation}, slot {best.slot}): {reported_line(setup.spec, best, confirmed, spec.objective)} -> {out / 'store.sqlite'}",
             markup=False,
         )
+        console.print(f"  {direction} world under the prior: {prior_text(best.latent)}; {where}", markup=False)
         caveat = winners_curse(confirmed, spec.objective, direction, not minimize)
         if caveat:
             console.print(f"  {caveat}", markup=False)

@@ -56,6 +56,25 @@ def confirm_flag():
     )
 
 
+def prior_bound_flag():
+    """``--prior-bound``: where a search may go in latent space (``search.prior``; issue 48)."""
+    return typer.Option(
+        "typical",
+        "--prior-bound",
+        help="Where the search may go: typical (the default: the prior's typical set |z| <= r, r the 99.9% quantile of |z| under "
+        "N(0, I), 5.44 for 10-d latents), none (beyond it: only the optimiser's box |z_i| <= 3), or a radius. Recorded in the campaign; "
+        "a resumed campaign must use its own.",
+    )
+
+
+def check_prior_bound(text: str) -> str:
+    """``--prior-bound`` names a bound (``search.prior.prior_bound``), refused in one line before anything loads."""
+    from worldagent.search.prior import prior_bound
+
+    prior_bound(text, 1)
+    return text
+
+
 def check_confirm(confirm: int) -> int:
     """``--confirm`` must be a count of episodes (0: skip)."""
     if confirm < 0:
@@ -78,6 +97,7 @@ def register(app: typer.Typer) -> None:
         optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes (the paper's), bo or random."),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         confirm: int = confirm_flag(),
+        prior: str = prior_bound_flag(),
         seed: int = typer.Option(0, "--seed", help="Seed of the campaigns and of every episode."),
         out: Path = typer.Option(Path("runs/strategic"), "--out", help="Run directory: store.sqlite, the figure and its JSON."),
         option: list[str] = option_flag(),
@@ -96,6 +116,7 @@ def register(app: typer.Typer) -> None:
 
         check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
         check_confirm(confirm)
+        check_prior_bound(prior)
         check_seed(seed)
         metric = check_metric(env, metric)
         check_optimiser(optimiser)
@@ -106,7 +127,7 @@ def register(app: typer.Typer) -> None:
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=seed, progress=not quiet)
             found = experiments.strategic_evaluation(
-                store, setup, metric, budget=budget, seed=seed, optimiser=optimiser, progress=not quiet, confirm=confirm
+                store, setup, metric, budget=budget, seed=seed, optimiser=optimiser, progress=not quiet, confirm=confirm, prior_bound=prior
             )
         scores = np.array([e.score for e in randoms])
         figure = draw_strategic(setup, found, scores, metric, out / f"strategic-{found['metric']}-s{seed}.png")

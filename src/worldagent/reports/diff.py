@@ -128,6 +128,10 @@ def search_lines(search: dict) -> list[str]:
         f"Most extreme world: {place(best)}, {search['metric']} A {number(best['a'])} → B {number(best['b'])} "
         f"(B − A {number(best['score'])}, the search's figure); {counted}, {found}.",
     ]
+    if best.get("prior"):  # issue 48: where the world lies under G's prior, and where the search was allowed to go
+        from worldagent.search.prior import bound_text, summary_text
+
+        lines.append(f"Under the prior: {summary_text(best['prior'])}; searched {bound_text(search.get('prior_bound'), best['prior']['dim'])}.")
     confirmed = search.get("confirmed")
     if confirmed:
         drop = confirmed["largest_drop"]

@@ -205,10 +205,11 @@ def strategic_section(run_dir: Path, results: dict) -> str:
                     number(f"{env}.{label}.raw", found["raw"]),
                     number(f"{env}.{label}.normalised", found["normalised"]),
                     *[number(f"{env}.{label}.{name}", found[name]) for name in extra],
+                    prior_cell(f"{env}.{label}.latent_norm", found.get("prior")),
                 ]
             )
             if "confirmed" in found:
-                rows.append(confirmed_row(env, label, found["confirmed"], extra))
+                rows.append([*confirmed_row(env, label, found["confirmed"], extra), "<td>the same world</td>"])
         note = (
             "<p>Found: the world's score on the episodes it was selected on, the best of many noisy scores and so partly luck "
             "(the winner's curse). Confirmed: the same world replayed on fresh episodes from keys no search drew, with the 95% "
@@ -218,8 +219,11 @@ def strategic_section(run_dir: Path, results: dict) -> str:
             "selection's own, partly luck.</p>"
         )
         return (
-            table(["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra]], rows, raw_cells=True)
+            table(
+                ["world", "reward (raw)", "reward (normalised)", *[n.replace("_", " ") for n in extra], "|z| (under the prior)"], rows, raw_cells=True
+            )
             + note
+            + PRIOR_NOTE
             + image(
                 res["layout"].figure("strategic"),
                 f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)",
@@ -227,6 +231,23 @@ def strategic_section(run_dir: Path, results: dict) -> str:
         )
 
     return per_env(results, "strategic", render, "min", "no strategic campaigns in the store")
+
+
+PRIOR_NOTE = (
+    "<p>|z|: the norm of the world's latent, with its percentile among draws of G's prior N(0, I) (their |z| follows the "
+    "χ distribution). Searches stay inside the prior's typical set, |z| at most its 99.9th percentile, unless run with "
+    "<code>--prior-bound none</code>; a world far beyond it is one the generator was never trained to make.</p>"
+)
+
+
+def prior_cell(key: str, prior: dict | None) -> str:
+    """A found world's |z| with its percentile under the prior (``search.prior.prior_summary``), or "–" without a latent."""
+    from worldagent.search.prior import ordinal
+
+    if not prior:
+        return "<td>–</td>"
+    where = f"{ordinal(100 * prior['percentile'])} pct" if prior["percentile"] <= 0.9999 else f"tail 1e{prior['tail_log10']:.0f}"
+    return number(key, prior["norm"], 3, f" ({where})")
 
 
 def confirmed_row(env: str, label: str, confirmed: dict, extra) -> list[str]:

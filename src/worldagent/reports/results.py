@@ -66,7 +66,10 @@ def best_evaluation(evaluations, maximize: bool):
 
 
 def world_summary(spec, evaluation, scale: Scale) -> dict:
-    """Raw score, normalised score and the highlighted metrics (e.g. crash rate) of one evaluated world."""
+    """Raw score, normalised score and the highlighted metrics (e.g. crash rate) of one evaluated world, and where its
+    latent lies under the prior (``search.prior.prior_summary``; None without a latent)."""
+    from worldagent.search.prior import prior_summary
+
     return {
         "raw": float(evaluation.score),
         "normalised": float(normalised_means(spec, [evaluation], scale)[0]),
@@ -74,6 +77,7 @@ def world_summary(spec, evaluation, scale: Scale) -> dict:
         "generation": evaluation.generation,
         "slot": evaluation.slot,
         **{name: float(world_means([evaluation], name)[0]) for name in spec.metrics.highlighted},
+        "prior": prior_summary(evaluation.latent) if np.size(evaluation.latent) else None,  # issue 48: |z| under G's prior
     }
 
 

@@ -296,10 +296,16 @@ def draw_strategic(setup: Any, result: dict, random_scores, metric: str, out: Pa
 
 
 def strategic_lines(spec: EnvSpec, result: dict) -> list[str]:
-    """The CLI's lines of a ``strategic_evaluation`` result: each direction's found beside confirmed, and a
-    winner's-curse caveat for each found figure outside its confirmed interval."""
+    """The CLI's lines of a ``strategic_evaluation`` result: each direction's found beside confirmed and where its
+    latent lies under the prior (``search.prior.prior_text``), and a winner's-curse caveat for each found figure
+    outside its confirmed interval."""
+    from worldagent.search.prior import prior_text
+
     metric, confirmed = result["metric"], result.get("confirmed") or (None, None)
-    lines = [f"{label} world: {reported_line(spec, result[label], c, metric)}" for label, c in zip(("min", "max"), confirmed)]
+    lines = []
+    for label, c, where in zip(("min", "max"), confirmed, result.get("searched") or ("", "")):
+        lines.append(f"{label} world: {reported_line(spec, result[label], c, metric)}")
+        lines.append(f"  under the prior: {prior_text(result[label].latent)}" + (f"; {where}" if where else ""))
     caveats = (winners_curse(c, metric, label, label == "max") for label, c in zip(("min", "max"), confirmed))
     return lines + [line for line in caveats if line]
 
@@ -310,6 +316,7 @@ def strategic_json(spec: EnvSpec, result: dict, randoms: list[Evaluation]) -> di
     from worldagent.analysis.confirm import random_failure_rate
     from worldagent.events import parse_selection
     from worldagent.influence.statistics import json_safe
+    from worldagent.search.prior import prior_summary
 
     metric = result["metric"]
     metrics = list(dict.fromkeys([metric, *spec.metrics.highlighted]))
@@ -322,10 +329,12 @@ def strategic_json(spec: EnvSpec, result: dict, randoms: list[Evaluation]) -> di
         "campaigns": list(result["campaigns"]),
         "confirm": result.get("confirm", 0),
         "random": {"worlds": len(scores), "mean": float(np.nanmean(scores)) if len(scores) else None},
+        "searched": list(result.get("searched") or ()),
     }
     for label, confirmed, selection in zip(("min", "max"), result.get("confirmed") or (None, None), result.get("selections") or (None, None)):
         evaluation = result[label]
         row = {"campaign": evaluation.campaign, "generation": evaluation.generation, "slot": evaluation.slot, "found_score": evaluation.score}
+        row["prior"] = prior_summary(evaluation.latent) if np.size(evaluation.latent) else None  # issue 48: |z| under G's prior
         if confirmed is not None:
             row |= {"selection": selection, **confirmed.as_dict(metrics, failure, baseline)}
             row["winners_curse"] = winners_curse(confirmed, metric, label, label == "max")

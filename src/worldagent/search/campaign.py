@@ -9,6 +9,12 @@ stored scores are told back and only the missing evaluations are run. Evaluation
 comes from (seed, generation, slot), not from a running stream, so a resumed campaign ends with
 exactly the evaluations of an uninterrupted one.
 
+Every search stays inside the prior's typical set |z| <= r unless its spec says otherwise (``prior_bound``; issue 48,
+``prior.py``): the optimiser is wrapped in ``optimisers.WithinPrior``, here and nowhere else, so CMA-ES, BO, the
+atlas's CMA-ME and a differential search all pass through it; the radius (or None) is recorded in the campaign's
+config as "prior_bound", and resuming with another is refused. Random search samples the prior and records none.
+A campaign stored before bounds existed has no "prior_bound" and is resumed as it was searched, without one.
+
 ``evaluate(z[n, dim], seeds int[n]) -> list of Outcome``: one outcome per latent. A backend
 (``evaluation.backends``) runs a generation's batches here or on Ray workers. A score that
 is NaN (a broken policy, a metric that failed) is stored and reported, and the campaign stops
@@ -28,7 +34,9 @@ import numpy as np
 from worldagent.errors import WorldagentError
 from worldagent.evaluation.backends import LocalBackend, split
 from worldagent.progress import progress_bar
-from worldagent.search.optimisers import OptimiserConfig, make_optimiser
+from worldagent.search.optimisers import OptimiserConfig, WithinPrior, make_optimiser, samples_prior, within_prior_config
+from worldagent.search.prior import TYPICAL, bound_text
+from worldagent.search.prior import prior_bound as bound_radius
 from worldagent.store import Evaluation, RunStore
 
 REPLAY_TOLERANCE = 1e-9
@@ -68,6 +76,8 @@ class CampaignSpec:
         agent: what the agent is (``policy.agent_record``: kind, path, file hash), kept in the
             campaign's config; a campaign is resumed only with an agent of the same files.
         extra: more settings kept in the config (e.g. an atlas's grid); resuming needs the same.
+        prior_bound: where the search may go (``prior.prior_bound``): ``prior.TYPICAL`` (the default: the prior's
+            99.9% ball), a radius, or None (beyond the prior: the optimiser's own box only). Recorded as the radius.
     """
 
     name: str
@@ -82,12 +92,48 @@ class CampaignSpec:
     chunk: int = 0
     agent: dict | None = None
     extra: dict | None = None
+    prior_bound: float | str | None = TYPICAL
 
     def validate(self) -> None:
         if self.budget < 1:
             raise WorldagentError(f"budget={self.budget}; evaluate at least one world.")
         if self.chunk < 0:
             raise WorldagentError(f"chunk={self.chunk}; pass 0 (whole generations) or a positive size.")
+        bound_radius(self.prior_bound, self.dim)
+
+
+PRIOR_KEY = "prior_bound"  # the campaign config's record of the radius searched within (None: beyond the prior)
+
+
+def campaign_radius(spec: CampaignSpec, existing: Any, samples_prior: bool) -> tuple[float | None, dict]:
+    """(the radius the campaign's latents are kept within, what its config records of it).
+
+    Random search (``samples_prior``) records nothing and is kept as it is; a stored campaign without a record (from
+    before bounds) resumes as it was searched; a stored campaign with another radius is refused in one line.
+    """
+    if samples_prior:
+        return None, {}
+    if existing is not None and PRIOR_KEY not in existing.config:
+        return None, {}
+    radius = bound_radius(spec.prior_bound, spec.dim)
+    if existing is not None:
+        stored = existing.config[PRIOR_KEY]
+        if (stored is None) != (radius is None) or (radius is not None and not np.isclose(stored, radius, rtol=1e-12, atol=0)):
+            flag = "none" if stored is None else "typical" if stored == bound_radius(TYPICAL, spec.dim) else f"{stored:.17g}"
+            raise WorldagentError(
+                f"campaign {spec.name!r} searched {bound_text(stored, spec.dim)}, not {bound_text(radius, spec.dim)}; "
+                f"resume it with --prior-bound {flag}, or start another campaign (--name or --out)."
+            )
+    return radius, {PRIOR_KEY: radius}
+
+
+def searched_where(campaign: Any) -> str:
+    """Where a stored campaign (``store.Campaign``) looked for worlds, in words: "drawn from the prior" (random
+    search), "searched within |z| <= 5.44 (…)" or "searched beyond the prior (no bound on |z|)" (also a campaign
+    from before bounds)."""
+    if samples_prior(campaign.optimiser):
+        return "drawn from the prior"
+    return "searched " + bound_text(campaign.config.get(PRIOR_KEY), int(campaign.config.get("dim", 0)) or 1)
 
 
 def best_evaluation(evaluations: Sequence[Evaluation], maximize: bool) -> Evaluation | None:
@@ -150,6 +196,8 @@ def run_campaign(
     """
     spec.validate()
     backend = backend or LocalBackend()
+    prior_sampler = optimiser.samples_prior if optimiser is not None else samples_prior(spec.optimiser)
+    radius, bound_record = campaign_radius(spec, store.campaign(spec.name) if resume else None, prior_sampler)  # else: refused as existing
     campaign = store.open_campaign(
         spec.name,
         spec.env,
@@ -163,13 +211,15 @@ def run_campaign(
             **asdict(spec.config),
             **({"agent": spec.agent} if spec.agent else {}),
             **(spec.extra or {}),
+            **bound_record,
             "stream": campaign_stream(spec.name),
         },
         resume,
     )
     stored = {(e.generation, e.slot): e for e in store.evaluations(spec.name)}
     check_repeats(spec.name, store.path, stored.values(), getattr(evaluate, "repeats", None))
-    optimiser = optimiser or make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, spec.config)
+    config = within_prior_config(spec.optimiser, spec.config, radius)
+    optimiser = WithinPrior(optimiser or make_optimiser(spec.optimiser, spec.dim, spec.maximize, spec.seed, config), radius)
     done, generation = 0, 0
     pick = max if spec.maximize else min
     best = pick([e.score for e in stored.values() if np.isfinite(e.score)], default=float("nan"))

@@ -27,14 +27,23 @@ def describe_campaign(campaign: Any, name: str) -> str:
         name: the campaign's id, what is said when there is no record.
 
     Returns:
-        e.g. "CMA-ES minimising return, 420 evaluations, seed 0",
+        e.g. "CMA-ES minimising return, 420 evaluations, within |z| <= 5.44, seed 0",
         "Failure rate of crash_rate > 0.5 by importance sampling, 1,000 worlds, seed 0",
         "Diff of two agents on 1,000 random worlds G(z), seed 0".
     """
     if campaign is None:
         return name
     config = campaign.config if isinstance(campaign.config, dict) else {}
-    return f"{campaign_head(campaign, config)}, seed {campaign.seed}"
+    return f"{campaign_head(campaign, config)}{bound_words(config)}, seed {campaign.seed}"
+
+
+def bound_words(config: dict) -> str:
+    """ ", within |z| <= 5.44" or ", beyond the prior": where a search was allowed to go (``campaign.PRIOR_KEY``);
+    nothing for a campaign that records no bound (random search, or one from before bounds)."""
+    if "prior_bound" not in config:
+        return ""
+    radius = config["prior_bound"]
+    return ", beyond the prior" if radius is None else f", within |z| <= {float(radius):.3g}"
 
 
 def campaign_head(campaign: Any, config: dict) -> str:

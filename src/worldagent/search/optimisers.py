@@ -19,6 +19,10 @@ by replaying its stored evaluations into a fresh optimiser (see ``campaign.py``)
   suggestion at 210 observations: ~0.11 s of CPU, ``benchmarks/bo_suggestion.py``).
 - ``random``: z ~ N(0, I), the baseline.
 
+Inside the prior (issue 48): a campaign wraps its optimiser in ``WithinPrior``, which projects every latent asked
+onto the prior's typical set |z| <= r (``prior.py``) before it is decoded and tells the optimiser where each was
+evaluated (``tell_evaluated``); random search samples the prior and is left as it is.
+
 Noise-aware searches (issue 50): a world's score is the mean of a few episodes, so the best score a search
 saw is partly luck (the winner's curse). These re-ask latents they have already evaluated (a re-evaluation
 is a new evaluation: its own (generation, slot) and episode seed) and report the latent with the best mean
@@ -60,7 +64,8 @@ class OptimiserConfig:
         popsize: CMA-ES population per generation (paper: 21).
         sigma0: CMA-ES initial step size (the latent prior has unit scale).
         bound: box bound |z_i| <= bound for CMA-ES and BO (3: the prior's ±3σ); 0 = unbounded
-            CMA-ES (BO always needs a box).
+            CMA-ES (BO always needs a box). A campaign inside the prior's ball (``CampaignSpec.prior_bound``)
+            replaces it (``within_prior_config``): the box then applies only to searches beyond the prior.
         bo_batch: BO suggestions per round.
         initial_points: BO random latents before the GP is used.
         xi: BO expected-improvement exploration margin.
@@ -92,6 +97,7 @@ class Optimiser:
 
     name = "optimiser"
     whole_generations = False  # asks only whole batches (a campaign's budget rounds up to them)
+    samples_prior = False  # draws from the prior itself (random search): a campaign keeps its latents as they are
 
     def __init__(self, dim: int, maximize: bool, seed: int):
         if dim < 1:
@@ -110,6 +116,12 @@ class Optimiser:
 
     def tell(self, z: np.ndarray, scores: np.ndarray) -> None:
         raise NotImplementedError
+
+    def tell_evaluated(self, asked: np.ndarray, evaluated: np.ndarray, scores: np.ndarray) -> None:
+        """Tell the scores of the latents ``asked``, which were evaluated at ``evaluated`` (``WithinPrior``
+        projected them into the prior's ball). Default: told the evaluated latents (a GP models the points it
+        saw; CMA-ME describes the worlds played); an optimiser that must be told what it asked overrides this."""
+        self.tell(evaluated, scores)
 
     def _checked(self, z, scores) -> tuple[np.ndarray, np.ndarray]:
         z, scores = np.asarray(z, np.float64), np.asarray(scores, np.float64)
@@ -164,10 +176,17 @@ class CMAES(Optimiser):
         return self._pending.copy()
 
     def tell(self, z, scores) -> None:
-        z, scores = self._checked(z, scores)
-        if self._pending is None or not np.array_equal(z, self._pending):
+        self.tell_evaluated(z, z, scores)
+
+    def tell_evaluated(self, asked, evaluated, scores) -> None:
+        """Told the evaluated latents (Lamarckian repair): pycma takes solutions other than those it asked and clips
+        their Mahalanobis length (``check_points``), so its mean stays where worlds were played. Without a box, as
+        pycma disregards changed solutions under its own boundary handling."""
+        asked = np.asarray(asked, np.float64)
+        evaluated, scores = self._checked(evaluated, scores)
+        if self._pending is None or not np.array_equal(asked, self._pending):
             raise WorldagentError("CMA-ES must be told the scores of exactly the generation it asked for.")
-        self.es.tell(list(z), list(self._minimised(scores)))
+        self.es.tell(list(evaluated), list(self._minimised(scores)))
         self._pending = None
 
 
@@ -302,6 +321,7 @@ class RandomSearch(Optimiser):
     """z ~ N(0, I): the distribution the generator was trained for (the baseline)."""
 
     name = "random"
+    samples_prior = True  # its latents are the prior's draws: no bound applies (``WithinPrior``)
 
     def __init__(self, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()):
         super().__init__(dim, maximize, seed)
@@ -422,12 +442,18 @@ class Reevaluating(Optimiser):
         return self._pending.copy()
 
     def tell(self, z, scores) -> None:
-        z, scores = self._checked(z, scores)
-        if self._pending is None or not np.array_equal(z, self._pending):
+        self.tell_evaluated(z, z, scores)
+
+    def tell_evaluated(self, asked, evaluated, scores) -> None:
+        """The base told its round (evaluated where ``WithinPrior`` moved it); the pool keeps the evaluated latents,
+        so a re-asked incumbent is the latent that was played."""
+        asked = np.asarray(asked, np.float64)
+        evaluated, scores = self._checked(evaluated, scores)
+        if self._pending is None or not np.array_equal(asked, self._pending):
             raise WorldagentError(f"{self.name} must be told the scores of exactly the generation it asked for.")
-        told = len(z) if self.tell_reevaluations else self.base.batch_size
-        self.base.tell(z[:told], scores[:told])
-        self.pooled.add(z, self._minimised(scores))
+        told = len(asked) if self.tell_reevaluations else self.base.batch_size
+        self.base.tell_evaluated(asked[:told], evaluated[:told], scores[:told])
+        self.pooled.add(evaluated, self._minimised(scores))
         self._pending = None
 
     def incumbent(self) -> tuple[np.ndarray, float, int]:
@@ -435,6 +461,55 @@ class Reevaluating(Optimiser):
         z = self.pooled.best(1)[0]
         mean = self.pooled.mean(z)
         return z, -mean if self.maximize else mean, self.pooled.count(z)
+
+
+class WithinPrior(Optimiser):
+    """Another optimiser whose latents are kept inside the prior's ball |z| <= ``radius`` (``prior.within_ball``).
+
+    Every latent the base asks is projected onto the ball before it is returned, so the campaign decodes, scores and
+    stores the projected latent; the base is told the scores through ``tell_evaluated`` (with what it asked and where
+    it was evaluated). ``radius`` None: the base's latents unchanged. ``run_campaign`` wraps every optimiser in one.
+    """
+
+    def __init__(self, base: Optimiser, radius: float | None):
+        super().__init__(base.dim, base.maximize, base.seed)
+        self.base, self.radius, self.name = base, radius, base.name
+        self.whole_generations = base.whole_generations
+        self._asked: np.ndarray | None = None
+
+    @property
+    def batch_size(self) -> int:
+        return self.base.batch_size
+
+    def ask(self, n: int) -> np.ndarray:
+        from worldagent.search.prior import within_ball
+
+        self._asked = np.asarray(self.base.ask(n), np.float64)
+        return within_ball(self._asked, self.radius)
+
+    def tell(self, z, scores) -> None:
+        from worldagent.search.prior import within_ball
+
+        if self._asked is None or not np.array_equal(np.asarray(z, np.float64), within_ball(self._asked, self.radius)):
+            raise WorldagentError(f"{self.name}: tell() the scores of exactly the latents it last asked for.")
+        asked, self._asked = self._asked, None
+        self.base.tell_evaluated(asked, np.asarray(z, np.float64), scores)
+
+    def __getattr__(self, name: str) -> Any:  # the base's own attributes (an atlas's grid, a pool's incumbent)
+        if name == "base":
+            raise AttributeError(name)
+        return getattr(self.base, name)
+
+
+def within_prior_config(name: str, config: OptimiserConfig, radius: float | None) -> OptimiserConfig:
+    """The settings optimiser ``name`` runs with inside the ball |z| <= ``radius`` (None: ``config`` as it is).
+
+    The ball replaces the per-coordinate box: CMA-ES runs without one (pycma would disregard the projected
+    solutions it is told under its boundary handling), BO's box is the smallest holding the ball, [-radius, radius].
+    """
+    if radius is None:
+        return config
+    return dataclasses_replace(config, bound=0.0 if name.startswith("cmaes") else float(radius))
 
 
 def reported_evaluation(evaluations: Sequence[Any], maximize: bool) -> Any:
@@ -462,6 +537,11 @@ def reported_evaluation(evaluations: Sequence[Any], maximize: bool) -> Any:
     pick = int(np.argmax(means) if maximize else np.argmin(means))
     group = candidates[pick]
     return dataclasses.replace(group[0], score=float(means[pick]), episodes=[episode for e in group for episode in e.episodes])
+
+
+def samples_prior(name: str) -> bool:
+    """Whether optimiser ``name`` draws its latents from the prior itself (random search: no bound applies)."""
+    return name == RandomSearch.name
 
 
 def make_optimiser(name: str, dim: int, maximize: bool, seed: int, config: OptimiserConfig = OptimiserConfig()) -> Optimiser:

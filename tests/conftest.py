@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import atexit
+import contextlib
+import fcntl
 import os
 import shutil
 import sys
@@ -19,9 +21,9 @@ os.environ.setdefault("WORLDAGENT_EPISODES_PER_CALL", "16")
 import jax  # noqa: E402
 import pytest
 
-from worldagent.worlds.dataset import make_dataset
+from worldagent.worlds.dataset import WorldDataset, make_dataset
 from worldagent.worlds.generator import build_generator
-from worldagent.worlds.vae import VAEConfig, train_vae
+from worldagent.worlds.vae import TrainedVAE, VAEConfig, train_vae
 
 # ``import toy_env`` (the toy environment of tests/toy_env) under any --import-mode.
 if str(Path(__file__).parent) not in sys.path:
@@ -102,24 +104,47 @@ def small_vae():
     return SMALL_VAE
 
 
+@contextlib.contextmanager
+def built_once(name: str):
+    """The path ``name`` in this run's cache, one xdist worker at a time: the first builds and saves there,
+    the others wait and load (a session fixture otherwise costs every worker that uses it)."""
+    with open(Path(CACHE_DIR) / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield Path(CACHE_DIR) / name
+
+
+def shared_dataset(env: str, count: int) -> WorldDataset:
+    with built_once(f"dataset-{env}-{count}.npz") as path:
+        if not path.exists():
+            make_dataset(env, count, 0, progress=False).save(path)
+        return WorldDataset.load(path)  # every worker the same, as loaded
+
+
+def shared_vae(data: WorldDataset) -> TrainedVAE:
+    with built_once(f"vae-{data.env}-{data.fingerprint}") as folder:
+        if not (folder / "vae.json").exists():
+            train_vae(data, SMALL_VAE, progress=False).save(folder)
+        return TrainedVAE.load(folder)  # every worker the same, as loaded
+
+
 @pytest.fixture(scope="session")
 def racing_data():
-    return make_dataset("racing", 256, 0, progress=False)
+    return shared_dataset("racing", 256)
 
 
 @pytest.fixture(scope="session")
 def harvest_data():
-    return make_dataset("harvest", 512, 0, progress=False)
+    return shared_dataset("harvest", 512)
 
 
 @pytest.fixture(scope="session")
 def racing_vae(racing_data):
-    return train_vae(racing_data, SMALL_VAE, progress=False)
+    return shared_vae(racing_data)
 
 
 @pytest.fixture(scope="session")
 def harvest_vae(harvest_data):
-    return train_vae(harvest_data, SMALL_VAE, progress=False)
+    return shared_vae(harvest_data)
 
 
 @pytest.fixture(scope="session")

@@ -139,7 +139,7 @@ def run_env(
 
 
 def envs_at_once(envs: list[str], sequential: bool = False) -> int:
-    """How many environments' pipelines run at the same time, each in a process of its own (the one place this is decided)."""
+    """How many processes run environments' phase chains at the same time (the one place this is decided; 1: all in this process)."""
     forced = sequential or os.environ.get(SEQUENTIAL_VARIABLE, "") not in ("", "0")
     return concurrent_envs(len(envs), os.cpu_count() or 1, jax_backend(), forced, can_share())
 
@@ -186,10 +186,6 @@ class Task:
     env: str
     phases: tuple[str, ...]
     needs: tuple[str, ...]
-
-    @property
-    def name(self) -> str:
-        return f"{self.env}/{self.phases[0]}..{self.phases[-1]}"
 
 
 def chain_needs(chain: Iterable[str], depends: dict[str, tuple[str, ...]]) -> tuple[str, ...]:

@@ -11,7 +11,16 @@ import pytest
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.manifest import Manifest
 from worldagent.reproduce.phases import CURRICULUM_DEPENDS, DEPENDS
-from worldagent.reproduce.pipeline import CHAINS, EnvFailed, Task, bars_for_phase, chain_needs, concurrent_envs, run_env_processes
+from worldagent.reproduce.pipeline import (
+    CHAINS,
+    EnvFailed,
+    Task,
+    bars_for_phase,
+    chain_needs,
+    concurrent_envs,
+    next_tasks,
+    run_env_processes,
+)
 from worldagent.reproduce.presets import PHASES
 
 STEPS = 25  # phases each stand-in env records: enough writes for unlocked read-modify-writes to lose some
@@ -100,3 +109,13 @@ def test_one_env_shows_its_progress_bars_at_a_time():
         assert freed  # released when the phase ended
     with bars_for_phase(False, token) as quiet, bars_for_phase(True, None) as alone:
         assert (quiet, alone) == (False, True)
+
+
+def test_the_env_with_most_phases_left_starts_first_once_ready():
+    evaluations = [Task(env, CHAINS[1], (f"{env}/generator", f"{env}/agent")) for env in ("racing", "harvest")]
+    trained = {f"{env}/{phase}": {"status": "done"} for env in ("racing", "harvest") for phase in CHAINS[0][:3]}
+    racing_done = {**trained, "racing/influence": {"status": "done"}}  # harvest still influences: it is behind, its evaluations go first
+    assert [task.env for task in next_tasks(evaluations, racing_done, 1)] == ["harvest"]
+    assert [task.env for task in next_tasks(evaluations, racing_done, 2)] == ["harvest", "racing"]
+    assert next_tasks(evaluations, {}, 2) == []  # no agent trained yet: nothing is ready
+    assert [task.env for task in next_tasks(evaluations, trained, 2)] == ["racing", "harvest"]  # a tie keeps the order

@@ -18,6 +18,7 @@ from worldagent.reproduce.pipeline import (
     bars_for_phase,
     chain_needs,
     concurrent_envs,
+    finished,
     next_tasks,
     run_env_processes,
 )
@@ -119,3 +120,24 @@ def test_the_env_with_most_phases_left_starts_first_once_ready():
     assert [task.env for task in next_tasks(evaluations, racing_done, 2)] == ["harvest", "racing"]
     assert next_tasks(evaluations, {}, 2) == []  # no agent trained yet: nothing is ready
     assert [task.env for task in next_tasks(evaluations, trained, 2)] == ["racing", "harvest"]  # a tie keeps the order
+
+
+class NamedConfigs:
+    """A stand-in preset: each phase's config is its name (and ``extra``)."""
+
+    def __init__(self, extra: int = 0):
+        self.extra = extra
+
+    def phase_config(self, env: str, phase: str) -> dict:
+        return {"phase": phase, "extra": self.extra}
+
+
+def test_a_chain_whose_phases_are_all_done_starts_no_process(tmp_path):
+    manifest = Manifest.open(tmp_path)
+    for phase in ("a", "b"):
+        manifest.start(f"x/{phase}", NamedConfigs().phase_config("x", phase))
+        manifest.finish(f"x/{phase}", {})
+    assert finished(Task("x", ("a", "b"), ()), manifest, NamedConfigs())
+    assert not finished(Task("x", ("a", "b", "c"), ()), manifest, NamedConfigs())  # c never ran
+    with pytest.raises(WorldagentError, match="another config"):
+        finished(Task("x", ("a",), ()), manifest, NamedConfigs(extra=1))

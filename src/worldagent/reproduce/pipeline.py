@@ -105,7 +105,11 @@ def reproduce(
     manifest.begin_run(preset.name, preset.to_dict(), envs)
     at_once = envs_at_once(envs, sequential)
     if at_once > 1:
-        run_env_processes(preset, out, env_tasks(preset, envs), at_once, progress, echo)
+        tasks = env_tasks(preset, envs)
+        for task in [task for task in tasks if finished(task, manifest, preset)]:  # said here: no process to start
+            run_env(manifest, preset, out, task.env, progress, echo, phases=task.phases)
+            tasks.remove(task)
+        run_env_processes(preset, out, tasks, at_once, progress, echo)
         manifest = Manifest.open(out)  # with every env's phases, as their processes wrote them
     else:
         for env in envs:
@@ -203,6 +207,11 @@ def env_tasks(preset: Preset, envs: list[str]) -> list[Task]:
             depends = CURRICULUM_DEPENDS if preset.curriculum_of(env) is not None else DEPENDS
             tasks.append(Task(env, chain, tuple(phase_key(env, phase) for phase in chain_needs(chain, depends))))
     return tasks
+
+
+def finished(task: Task, manifest: Manifest, preset: Preset) -> bool:
+    """Whether every phase of ``task`` is done with the preset's config (a rerun only says so)."""
+    return all(manifest.is_done(phase_key(task.env, phase), preset.phase_config(task.env, phase)) for phase in task.phases)
 
 
 def ready(task: Task, phases: dict) -> bool:

@@ -18,28 +18,33 @@ os.environ.setdefault("XLA_FLAGS", "--xla_backend_optimization_level=0 --xla_llv
 # 256 users get (any fixed size keeps results batch-invariant; test_batch_invariance checks 64).
 os.environ.setdefault("WORLDAGENT_EPISODES_PER_CALL", "16")
 
-import jax  # noqa: E402
-import pytest
+# Many tests compile the same programs (an evaluator, a trainer) from fresh Python closures; a
+# compilation cache for this session compiles each once. It starts empty every run, so CI timings
+# stay honest. Set as environment variables before JAX starts: pytest-xdist workers and the processes
+# `reproduce` spawns for its environments inherit them, and share the folder.
+if "WORLDAGENT_TEST_JAX_CACHE" not in os.environ:
+    os.environ["WORLDAGENT_TEST_JAX_CACHE"] = tempfile.mkdtemp(prefix="worldagent-jax-cache-")
+    atexit.register(shutil.rmtree, os.environ["WORLDAGENT_TEST_JAX_CACHE"], ignore_errors=True)
+CACHE_DIR = os.environ["WORLDAGENT_TEST_JAX_CACHE"]
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", CACHE_DIR)
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
 
-from worldagent.worlds.dataset import WorldDataset, make_dataset
-from worldagent.worlds.generator import build_generator
-from worldagent.worlds.vae import TrainedVAE, VAEConfig, train_vae
+import jax  # noqa: E402
+import pytest  # noqa: E402
+
+from worldagent.worlds.dataset import WorldDataset, make_dataset  # noqa: E402
+from worldagent.worlds.generator import build_generator  # noqa: E402
+from worldagent.worlds.vae import TrainedVAE, VAEConfig, train_vae  # noqa: E402
+
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])  # should JAX have started already
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 # ``import toy_env`` (the toy environment of tests/toy_env) under any --import-mode.
 if str(Path(__file__).parent) not in sys.path:
     sys.path.insert(0, str(Path(__file__).parent))
 
-# Many tests compile the same programs (an evaluator, a trainer) from fresh Python closures; a
-# compilation cache for this session compiles each once. It starts empty every run, so CI timings
-# stay honest.
-# pytest-xdist workers inherit the directory of the process that starts them, and share it.
-if "WORLDAGENT_TEST_JAX_CACHE" not in os.environ:
-    os.environ["WORLDAGENT_TEST_JAX_CACHE"] = tempfile.mkdtemp(prefix="worldagent-jax-cache-")
-    atexit.register(shutil.rmtree, os.environ["WORLDAGENT_TEST_JAX_CACHE"], ignore_errors=True)
-CACHE_DIR = os.environ["WORLDAGENT_TEST_JAX_CACHE"]
-jax.config.update("jax_compilation_cache_dir", CACHE_DIR)
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 # Small but long enough for the latent to be used: on 512 harvest maps a VAE needs a few hundred
 # updates before it beats the mean image (fewer, and the posterior has not left the prior yet).

@@ -109,7 +109,7 @@ def test_apples_setting_of_both_repairs(harvest_data):
     assert OpenRooms.from_dataset(harvest_data).config["apples"] == CLUSTERS  # the open repair's default
     assert HarvestRepair.from_dataset(harvest_data).config["apples"] == median_apples(harvest_data.worlds)  # the paper's: K
     saved = {"apples": 12, "rounds": 1, "entrances": "posterior"}  # what generators saved before clusters record
-    assert OpenRooms.from_dataset(harvest_data, saved).apples == 12
+    assert OpenRooms.from_dataset(harvest_data, saved).config == saved  # decodes as it did: top-K apples, the posterior entrance rule
     assert HarvestRepair.from_dataset(harvest_data, {"apples": CLUSTERS}).config == {"apples": CLUSTERS, "walls": "nearest"}
     for bad in ("many", 2.5):
         with pytest.raises(WorldagentError, match="apples="):

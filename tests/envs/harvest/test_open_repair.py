@@ -12,6 +12,7 @@ from scipy import ndimage
 
 from worldagent.envs.harvest.maps import NUM_CORNERS, bordering_walls, entrance_candidates, generate_maps, region_walls, seeds_from
 from worldagent.envs.harvest.open_repair import (
+    ENTRANCE_RULES,
     OpenRooms,
     choose_rooms,
     corner_options,
@@ -143,22 +144,39 @@ def test_entrances_follow_the_wall_logits():
     candidates = np.asarray(candidates).any(axis=0)
     count = int(candidates.sum())
     wall_logit = jnp.where(walls, 5.0, -5.0)
-    for posterior in (True, False):
-        np.testing.assert_array_equal(layout_walls_jit(wall_logit, choice, posterior), walls)
-        corner_cell = layout_walls_jit(wall_logit.at[7, 8].set(-9.0), choice, posterior)  # no straight passage through a corner
+    for rule in ENTRANCE_RULES:
+        np.testing.assert_array_equal(layout_walls_jit(wall_logit, choice, rule), walls)
+        corner_cell = layout_walls_jit(wall_logit.at[7, 8].set(-9.0), choice, rule)  # no straight passage through a corner
         np.testing.assert_array_equal(corner_cell, walls)
-        opened = layout_walls_jit(wall_logit.at[7, 3].set(-np.log(count) - 0.1), choice, posterior)
+        opened = layout_walls_jit(wall_logit.at[7, 3].set(-np.log(count) - 0.1), choice, rule)
         np.testing.assert_array_equal(opened, walls.at[7, 3].set(False))
     # One unsure cell: below 0 raises the likelihood, but an entrance (half the time, at one of
     # the candidates) is the more probable only below about -log(candidates).
     unsure = wall_logit.at[7, 3].set(-np.log(count) + 0.5)
-    np.testing.assert_array_equal(layout_walls_jit(unsure, choice, posterior=False), walls.at[7, 3].set(False))
-    np.testing.assert_array_equal(layout_walls_jit(unsure, choice, posterior=True), walls)
+    np.testing.assert_array_equal(layout_walls_jit(unsure, choice, "likelihood"), walls.at[7, 3].set(False))
+    np.testing.assert_array_equal(layout_walls_jit(unsure, choice, "posterior"), walls)
     # Every candidate a little unsure: no one cell is far below 0, but together they say there is an entrance.
     doubtful = jnp.where(jnp.asarray(candidates), -0.2, wall_logit).at[7, 3].set(-0.3)
-    np.testing.assert_array_equal(layout_walls_jit(doubtful, choice, posterior=True), walls.at[7, 3].set(False))
+    np.testing.assert_array_equal(layout_walls_jit(doubtful, choice, "posterior"), walls.at[7, 3].set(False))
     sure = jnp.where(jnp.asarray(candidates), 0.2, wall_logit)  # all above 0: never an entrance
-    np.testing.assert_array_equal(layout_walls_jit(sure, choice, posterior=True), walls)
+    np.testing.assert_array_equal(layout_walls_jit(sure, choice, "posterior"), walls)
+
+
+def test_a_blurry_wall_keeps_its_closed_room_and_a_decisive_gap_still_opens_it():
+    """Decodes of the prior blur walls (logits near 2) and scatter small doubts along them: the posterior rule
+    sums those doubts into an entrance the map does not have; the default (tempered) rule keeps the room closed."""
+    choice = jnp.asarray([1 + 3 * 10 + 4, 0, 0, 0], jnp.int32)
+    _, walls, _, candidates = generator_rooms(choice)
+    cells = np.argwhere(np.asarray(candidates).any(axis=0))
+    blurry = jnp.where(walls, 2.0, -5.0)
+    doubts = blurry.at[tuple(cells[::4].T)].set(-1.5)  # 3 of the 12 candidates a little below 0
+    free = ~np.asarray(layout_walls_jit(doubts, choice, "tempered"))
+    assert ndimage.label(free, FOUR_NEIGHBOURS)[1] == 2  # the room inside and the space outside stay apart
+    np.testing.assert_array_equal(layout_walls_jit(doubts, choice, "tempered"), walls)
+    assert int((np.asarray(walls) & ~np.asarray(layout_walls_jit(doubts, choice, "posterior"))).sum()) == 1  # the old rule opened it
+    gap = tuple(cells[5])
+    opened = layout_walls_jit(blurry.at[gap].set(-np.log(len(cells)) - 1.0), choice, "tempered")
+    np.testing.assert_array_equal(opened, walls.at[gap].set(False))
 
 
 def test_apples_are_the_k_most_likely_free_cells(generated):
@@ -183,7 +201,7 @@ def test_jit_and_vmap_agree_with_one_call(random_repaired):
 
 def test_from_dataset_settings_and_config(harvest_data):
     default = OpenRooms.from_dataset(harvest_data)
-    assert default.config == {"apples": "clusters", "rounds": 1, "entrances": "posterior"}  # as the generator places them
+    assert default.config == {"apples": "clusters", "rounds": 1, "entrances": "tempered"}  # as the generator places them
     assert OpenRooms.from_dataset(harvest_data, {"apples": median_apples(harvest_data.worlds)}).apples == median_apples(harvest_data.worlds)
     chosen = OpenRooms.from_dataset(harvest_data, {"apples": 12, "rounds": 2, "entrances": "likelihood"})
     assert OpenRooms.from_dataset(harvest_data, json.loads(json.dumps(chosen.config))) == chosen

@@ -37,8 +37,9 @@ from worldagent import experiments  # noqa: E402
 from worldagent.agents.policy import agent_record  # noqa: E402
 from worldagent.analysis.confirm import ELITE_REPEATS, REPEATS, confirm  # noqa: E402
 from worldagent.files import write_text  # noqa: E402
-from worldagent.search.atlas import QDOptimiser, archive_of, atlas_optimiser, noisy_atlas_optimiser  # noqa: E402
+from worldagent.search.atlas import QDOptimiser, archive_of, atlas_optimiser  # noqa: E402
 from worldagent.search.campaign import CampaignSpec, run_campaign  # noqa: E402
+from worldagent.search.noisy_atlas import noisy_atlas_optimiser  # noqa: E402
 from worldagent.search.objectives import LatentObjective, Objective  # noqa: E402
 from worldagent.search.optimisers import OptimiserConfig, make_optimiser, reported_evaluation  # noqa: E402
 from worldagent.store import RunStore  # noqa: E402

@@ -561,14 +561,15 @@ def atlas(
             distinct failing worlds (None: none counted).
         name: the campaign (default ``atlas_campaign_name``); ``resume`` continues it.
         confirm: fresh episodes per elite (default ``analysis.confirm.ELITE_REPEATS``; 0 skips): every
-            elite replayed on confirmation keys, giving the corrected archive (``search.atlas.confirm_elites``).
+            elite replayed on confirmation keys, giving the corrected archive (``search.corrected_atlas.confirm_elites``).
         prior_bound: where the emitters may go (``CampaignSpec.prior_bound``; default the prior's typical set).
 
     Returns:
-        ``atlas_summary`` of the campaign, with "confirmed": ``search.atlas.corrected_summary`` (None when skipped).
+        ``atlas_summary`` of the campaign, with "confirmed": ``search.corrected_atlas.corrected_summary`` (None when skipped).
     """
     from worldagent.analysis.confirm import ELITE_REPEATS
-    from worldagent.search.atlas import atlas_optimiser, confirm_elites
+    from worldagent.search.atlas import atlas_optimiser
+    from worldagent.search.corrected_atlas import confirm_elites
 
     metric = setup.metric(metric)
     optimiser, extra = atlas_optimiser(setup.spec, setup.generator, maximize, seed, budget, descriptors, cells)

@@ -19,12 +19,11 @@ from worldagent.search.atlas import (
     atlas_names,
     cell_of,
     check_descriptors,
-    corrected_summary,
     distinct_count,
     grid_ranges,
     read_atlas,
-    stored_elites,
 )
+from worldagent.search.corrected_atlas import corrected_summary, stored_elites
 from worldagent.store import Evaluation, RunStore
 
 GRID = Grid(("a", "b"), (2, 3), ((0.0, 1.0), (0.0, 3.0)))

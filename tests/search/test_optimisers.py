@@ -220,7 +220,8 @@ def two_descriptors(z):
 
 
 def qd(kind, **kw):
-    from worldagent.search.atlas import AdaptiveQD, CorrectedQD, Grid, QDConfig
+    from worldagent.search.atlas import Grid, QDConfig
+    from worldagent.search.noisy_atlas import AdaptiveQD, CorrectedQD
 
     grid = Grid(("a", "b"), (4, 4), ((-2.0, 2.0), (-2.0, 2.0)))
     if kind == "corrected":
@@ -246,7 +247,7 @@ def test_the_corrected_atlas_re_asks_its_best_elites_after_the_search():
 
 @pytest.mark.integration
 def test_adaptive_sampling_lets_a_challenger_in_only_on_its_pooled_mean():
-    from worldagent.search.atlas import CHALLENGE_EVALUATIONS
+    from worldagent.search.noisy_atlas import CHALLENGE_EVALUATIONS
 
     opt = qd("adaptive")
     rng = np.random.default_rng(1)

@@ -53,9 +53,9 @@ def check_atlas_request(
 
 
 def confirmed_lines(confirmed: dict | None, descriptors, shown: int = 5) -> list[str]:
-    """Found beside confirmed for an atlas's corrected archive (``search.atlas.corrected_summary``), and the cells
+    """Found beside confirmed for an atlas's corrected archive (``search.corrected_atlas.corrected_summary``), and the cells
     found failing that the confirmation does not confirm (the first ``shown``)."""
-    from worldagent.search.atlas import cell_line
+    from worldagent.search.corrected_atlas import cell_line
 
     if confirmed is None:
         return ["  elites not confirmed (--confirm 0): every figure above is the search's own, biased by its selection"]

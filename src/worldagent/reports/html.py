@@ -437,7 +437,7 @@ def atlas_section(run_dir: Path, results: dict) -> str:
 
 
 def corrected_rows(key: str, confirmed: dict | None) -> list[list[str]]:
-    """The corrected archive (every elite replayed on fresh episodes; ``search.atlas.corrected_summary``) beside the
+    """The corrected archive (every elite replayed on fresh episodes; ``search.corrected_atlas.corrected_summary``) beside the
     found one: QD-score and, with a failure, failing cells and distinct failing worlds."""
     if confirmed is None:
         return [["<td>elites confirmed on fresh episodes</td><td class='num'>no (the figures above are the search's own)</td>"]]

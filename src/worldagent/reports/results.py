@@ -215,7 +215,8 @@ def atlas_results(spec, store, outputs: dict) -> dict:
     from worldagent.analysis.stored import campaign_name, read_estimate
     from worldagent.errors import WorldagentError
     from worldagent.events import parse_selection
-    from worldagent.search.atlas import corrected_summary, distinct_count, qd_offset, read_atlas, stored_elites
+    from worldagent.search.atlas import distinct_count, qd_offset, read_atlas
+    from worldagent.search.corrected_atlas import corrected_summary, stored_elites
 
     atlas = read_atlas(store, outputs["campaign"])
     scores = np.array([e.score for e in atlas.evaluations], np.float64)

@@ -2,7 +2,8 @@
 
 A figure carries ``<!-- from: FILE KEY -->`` right after it (and its unit): FILE a JSON of the repository, KEY a
 dotted path into it (``seconds``, ``racing_steps_per_s.4096``) where ``*`` matches every key of a level and the
-matches are summed (``phases.racing/*.wall_s``: an env's phases), then an optional ``/N`` or ``xN`` that scales
+matches are summed (``phases.racing/*.wall_s``: an env's phases), or ``+`` sums whole keys (no brackets: the
+site's cross-reference check reads ``[..][..]`` as a link even in a comment), then an optional ``/N`` or ``xN`` that scales
 the value to the unit the prose uses (``/60``: seconds as minutes). The figure is the last number before the
 comment on its line (``33½`` reads 33.5); it must equal the recorded value to the precision it is written with.
 The comment is invisible on GitHub and on the site, so the prose reads as before.
@@ -47,7 +48,9 @@ def quotes_of(text: str, page: str) -> list[Quote]:
 
 
 def recorded(data, key: str) -> float:
-    """The value at a dotted ``key`` of ``data``; ``*`` (or any glob) at a level sums over its matches."""
+    """The value at a dotted ``key`` of ``data``; ``*`` (or any glob) at a level sums over its matches, ``+`` sums keys."""
+    if "+" in key:
+        return sum(recorded(data, part) for part in key.split("+"))
     values = [data]
     for part in key.split("."):
         found = []

@@ -137,6 +137,7 @@ def test_a_quoted_figure_matches_its_result_file(tmp_path):
     assert "records 9.88" in quote_problem(quotes[2], tmp_path)
     assert "not in the repository" in quote_problem(quotes_of("1 s<!-- from: nope.json seconds -->", "p.md")[0], tmp_path)
     assert recorded({"a": [1, 2]}, "a.1") == 2.0
+    assert recorded({"p": {"a/x": 60.0, "a/y": 30.0, "b/x": 1}}, "p.a/x+p.b/x") == 61.0  # whole keys summed
     with pytest.raises(KeyError):
         recorded({"a": "text"}, "a")
     assert shown_value("1,234") == (1234.0, 0.5) and shown_value("0.021") == (0.021, 0.0005)

@@ -35,6 +35,7 @@ import numpy as np
 from scipy import ndimage
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harvest_open_repair import warm_ms  # noqa: E402  (warm ms per map of a jitted repair)
 from machine import describe_machine, require_input  # noqa: E402
 from worldagent.envs import registry  # noqa: E402
 from worldagent.envs.harvest.apples import rooms_from_walls  # noqa: E402
@@ -92,14 +93,6 @@ def relative(side: dict, fresh: dict) -> dict:
     for key in ("rooms_per_map", "closed_room"):
         out[key] = side[key] / fresh[key] - 1
     return out
-
-
-def warm_ms(repair, logits) -> float:
-    run = jax.jit(lambda x: repair(x))
-    jax.block_until_ready(run(logits))
-    start = time.perf_counter()
-    jax.block_until_ready(run(logits))
-    return 1e3 * (time.perf_counter() - start) / len(logits)
 
 
 def main() -> None:

@@ -11,9 +11,16 @@ import sys
 import tempfile
 from pathlib import Path
 
-# Test programs are tiny and compiled once each: compile them fast, not well (about 17% of the
-# suite's time). Set before JAX starts its backend; a user's XLA_FLAGS win.
-os.environ.setdefault("XLA_FLAGS", "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true")
+# Test programs are tiny and compiled once each, and compiling is most of the suite's time: compile
+# them fast, not well. Besides LLVM's optimisation, XLA's CPU fusion emitters, XNNPACK's fusions and
+# split code generation cost compile time that these short runs never win back: without them the
+# default run took 487 CPU-s instead of 649 (2026-11-29, same commit, all passing). Set before JAX
+# starts its backend; a user's XLA_FLAGS win.
+TEST_XLA_FLAGS = (
+    "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
+    " --xla_cpu_use_fusion_emitters=false --xla_cpu_use_xnnpack=false --xla_cpu_parallel_codegen_split_count=1"
+)
+os.environ.setdefault("XLA_FLAGS", TEST_XLA_FLAGS)
 # Tests evaluate a handful of worlds at a time: pad each evaluation call to 16 episodes, not the
 # 256 users get (any fixed size keeps results batch-invariant; test_batch_invariance checks 64).
 os.environ.setdefault("WORLDAGENT_EPISODES_PER_CALL", "16")

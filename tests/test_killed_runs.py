@@ -25,7 +25,6 @@ TESTS = Path(__file__).resolve().parent
 CHILD = """
 import os, signal, sys
 sys.path.insert(0, {tests!r})
-os.environ.setdefault("XLA_FLAGS", "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true")
 {setup}
 out, kill_at, calls = sys.argv[1], int(sys.argv[2]), [0]
 owner, name = {target}

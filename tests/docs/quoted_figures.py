@@ -5,7 +5,7 @@ dotted path into it (``seconds``, ``racing_steps_per_s.4096``) where ``*`` match
 matches are summed (``phases.racing/*.wall_s``: an env's phases), or ``+`` sums whole keys (no brackets: the
 site's cross-reference check reads ``[..][..]`` as a link even in a comment), then an optional ``/N`` or ``xN`` that scales
 the value to the unit the prose uses (``/60``: seconds as minutes). The figure is the last number before the
-comment on its line (``33½`` reads 33.5); it must equal the recorded value to the precision it is written with.
+comment on its line (``33½`` reads 33.5, ``−0.02`` and ``-0.02`` are negative); it must equal the recorded value to the precision it is written with.
 The comment is invisible on GitHub and on the site, so the prose reads as before.
 """
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 FROM = re.compile(r"<!--\s*from:\s*(?P<file>\S+)\s+(?P<key>\S+)(?:\s+(?P<op>[/x])(?P<factor>[\d.e+]+))?\s*-->")
-FIGURE = re.compile(r"(\d[\d,]*(?:\.\d+)?)(½)?(?!.*\d)")
+FIGURE = re.compile(r"([−-]?\d[\d,]*(?:\.\d+)?)(½)?(?!.*\d)")  # a minus sign (− or -) is the figure's
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ def recorded(data, key: str) -> float:
 def shown_value(shown: str) -> tuple[float, float]:
     """(the figure, half a unit of its last written digit: how far the recorded value may be from it)."""
     half = shown.endswith("½")
-    digits = shown.removesuffix("½").replace(",", "")
+    digits = shown.removesuffix("½").replace(",", "").replace("−", "-")
     decimals = len(digits.partition(".")[2])
     return float(digits) + (0.5 if half else 0.0), (0.25 if half else 0.5 * 10**-decimals)
 

@@ -141,6 +141,12 @@ def test_a_quoted_figure_matches_its_result_file(tmp_path):
     with pytest.raises(KeyError):
         recorded({"a": "text"}, "a")
     assert shown_value("1,234") == (1234.0, 0.5) and shown_value("0.021") == (0.021, 0.0005)
+    assert [q.shown for q in quotes_of("fell by −0.02<!-- from: r.json a --> [-1.5<!-- from: r.json b -->, 3<!-- from: r.json c -->]", "p.md")] == [
+        "−0.02",
+        "-1.5",
+        "3",
+    ]
+    assert shown_value("−0.02") == (-0.02, 0.005)
 
 
 def test_every_quoted_figure_matches_its_result_file():

@@ -393,6 +393,7 @@ def compare_optimisers(
     progress: bool = True,
     resume: bool = True,
     config: OptimiserConfig | None = None,
+    prior_bound: float | str | None = TYPICAL,
 ) -> dict[str, list[np.ndarray]]:
     """Run each optimiser for each seed on the same objective (paper §6.1.3, Figure 7).
 
@@ -400,6 +401,7 @@ def compare_optimisers(
     slow); CMA-ES, which evaluates whole generations, may run a few more worlds, and only the
     first ``budget`` count, so that all compare on equal terms. Random search draws from its own
     stream (``optimisers.RANDOM_STREAM``), so its worlds are not CMA-ES's first generation.
+    ``prior_bound``: where every optimiser may go (``CampaignSpec.prior_bound``; default the prior's typical set).
 
     Returns:
         {optimiser: [f64[budget] scores in evaluation order, one per seed]} for
@@ -431,6 +433,7 @@ def compare_optimisers(
                 resume=resume,
                 progress=progress,
                 config=config,
+                prior_bound=prior_bound,
             )
             runs[optimiser].append(np.array([e.score for e in evaluations[:limit]], np.float64))
     return runs

@@ -187,3 +187,19 @@ def test_a_campaign_searched_within_another_radius_names_it_to_resume(tmp_path):
         with pytest.raises(WorldagentError, match=r"resume it with --prior-bound 4,"):
             run_campaign(store, spec(budget=24), along_axis, resume=True, progress=False)
         assert np.all(norms(run_campaign(store, spec(budget=24, prior_bound="4"), along_axis, resume=True, progress=False)) <= 4.0 + 1e-12)
+
+
+def test_compare_searches_every_optimiser_within_the_bound_it_is_given(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from worldagent import experiments
+    from worldagent.cli import app
+
+    asked = []
+    monkeypatch.setattr(experiments, "search", lambda *args, **kw: (asked.append((kw["optimiser"], kw["prior_bound"])), ([], None))[1])
+    setup = type("Setup", (), {"metric": lambda self, name: name})()
+    experiments.compare_optimisers(None, setup, "return", optimisers=("cmaes", "random"), budget=6, seeds=(0,), prior_bound=None)
+    experiments.compare_optimisers(None, setup, "return", optimisers=("bo",), budget=6, seeds=(0, 1))
+    assert asked == [("cmaes", None), ("random", None), ("bo", prior.TYPICAL), ("bo", prior.TYPICAL)]
+    bad = CliRunner().invoke(app, ["compare", "racing", "--agent", "driver", "--generator", str(tmp_path), "--prior-bound", "wide"])
+    assert bad.exit_code == 2 and "--prior-bound 'wide'" in bad.output

@@ -156,6 +156,7 @@ def register(app: typer.Typer) -> None:
         ),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         confirm: int = confirm_flag(),
+        prior: str = prior_bound_flag(),
         out: Path = typer.Option(
             Path("runs/compare"), "--out", help="Run directory: store.sqlite, comparison.png/.md/.csv (and with --confirm, .json and -confirmed.csv)."
         ),
@@ -183,6 +184,7 @@ def register(app: typer.Typer) -> None:
 
         check_counts(budget=budget, seeds=seeds, random_worlds=random_worlds, repeats=repeats)
         check_confirm(confirm)
+        check_prior_bound(prior)
         names = optimiser_names(optimisers)
         check_seed(random_seed, "--random-seed")
         if random_seed < seeds:
@@ -196,7 +198,7 @@ def register(app: typer.Typer) -> None:
         with RunStore(out) as store:
             randoms = experiments.random_evaluation(store, setup, metric, worlds=random_worlds, seed=random_seed, progress=not quiet)
             arguments = {"maximize": maximize, "optimisers": names, "budget": budget, "seeds": tuple(range(seeds)), "progress": not quiet}
-            runs = experiments.compare_optimisers(store, setup, metric, **arguments)
+            runs = experiments.compare_optimisers(store, setup, metric, **arguments, prior_bound=prior)
             confirmed = experiments.confirm_optimisers(store, setup, metric, repeats=confirm, **arguments)
         random_scores = np.array([e.score for e in randoms])
         rows = sample_efficiency(runs, random_scores, maximize=maximize)

@@ -1,0 +1,81 @@
+"""The main job's time: `worldagent reproduce --preset quick` from nothing, end to end (target: 10 minutes on 2 cores).
+
+    python benchmarks/main_job_time.py [--env racing,harvest] [--out /tmp/main-job]
+
+Runs the README's main job in a fresh run directory (``--out`` is removed first) with the installed
+``worldagent``, as a new user would (no compilation cache, no cached phase), and records its wall seconds,
+the CPU seconds of its processes (user + sys: load-independent where wall is not), the load average
+before it started, and each phase's own wall seconds from the run's ``manifest.json``, with the machine,
+in ``benchmarks/results/main-job-time-<backend>.json``. ``--env racing,harvest`` is what a fresh install
+runs (``all`` also takes installed example envs such as ``ued_maze``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import record  # noqa: E402
+
+TARGET_WALL_S = 600
+
+
+def children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def phase_seconds(manifest: dict) -> dict[str, float]:
+    """Each phase's own wall seconds (``env/phase``), as the run recorded them."""
+    return {name: phase["wall_s"] for name, phase in manifest["phases"].items() if phase.get("wall_s") is not None}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="racing,harvest", help="as reproduce's --env (default: what a fresh install has)")
+    parser.add_argument("--out", type=Path, default=Path("/tmp/main-job"), help="run directory, removed first")
+    args = parser.parse_args()
+    shutil.rmtree(args.out, ignore_errors=True)
+    worldagent = Path(sys.executable).with_name("worldagent")
+    command = [str(worldagent), "reproduce", "--preset", "quick", "--env", args.env, "--out", str(args.out)]
+    load = os.getloadavg()[0]
+    cpu, start = children_cpu(), time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - start, children_cpu() - cpu
+    phases = phase_seconds(json.loads((args.out / "manifest.json").read_text()))
+    result = {
+        "command": " ".join(["worldagent", *command[1:]]),
+        "exit_code": done.returncode,
+        "target_wall_s": TARGET_WALL_S,
+        "wall_s": round(wall, 1),
+        "cpu_s": round(cpu, 1),
+        "load_before": round(load, 2),
+        "phases": phases,
+        "chains_s": chain_seconds(phases),
+    }
+    print(record("main-job-time", result))
+    print(f"{wall:.0f} s wall ({wall / 60:.1f} min), {cpu:.0f} s CPU, exit {done.returncode}; target {TARGET_WALL_S} s")
+
+
+def chain_seconds(phases: dict[str, float]) -> dict[str, float]:
+    """Each env's training chain (dataset, generator, agent, influence) and evaluation chain (the rest), summed."""
+    training = ("dataset", "generator", "agent", "influence")
+    chains: dict[str, float] = {}
+    for name, seconds in phases.items():
+        env, _, phase = name.partition("/")
+        if phase:
+            key = f"{env}/{'training' if phase in training else 'evaluation'}"
+            chains[key] = round(chains.get(key, 0.0) + seconds, 1)
+    return chains
+
+
+if __name__ == "__main__":
+    main()

@@ -51,8 +51,9 @@ def campaign_values(store: RunStore, campaign: str, names) -> dict[str, np.ndarr
     return values
 
 
-def influence_values(influence_dir: Path, prefix: str = "") -> tuple[object, dict[str, list[dict[str, np.ndarray]]]]:
-    """(spec, {label: [per seed {metric: f64[W]} + "score", "failing"]}) of an influence directory's evaluations."""
+def influence_values(influence_dir: Path, prefix: str = "", seeds=None) -> tuple[object, dict[str, list[dict[str, np.ndarray]]]]:
+    """(spec, {label: [per seed {metric: f64[W]} + "score", "failing"]}) of an influence directory's evaluations
+    (of ``seeds``, default all of its seeds)."""
     record = json.loads((influence_dir / "influence.json").read_text())
     spec, config = registry.get(record["env"]), record["config"]
     params = spec.make_env(config.get("options") or {})[1]
@@ -60,7 +61,7 @@ def influence_values(influence_dir: Path, prefix: str = "") -> tuple[object, dic
     found: dict[str, list[dict[str, np.ndarray]]] = {label: [] for label in LABELS}
     with RunStore(influence_dir) as store:
         for label in LABELS:
-            for seed in config["seeds"]:
+            for seed in config["seeds"] if seeds is None else seeds:
                 name = f"influence-eval-{prefix}{label}-s{seed}-w{config['eval_worlds']}-r{config['repeats']}"
                 values = campaign_values(store, name, spec.metrics.names)
                 main = values[spec.metrics.main]
@@ -73,9 +74,10 @@ def influence_values(influence_dir: Path, prefix: str = "") -> tuple[object, dic
     return spec, found
 
 
-def pooled_influenced_vs_default(influence_dir: str | Path, prefix: str = "", resamples: int = 2000) -> dict:
-    """{statistic: pooled_difference of influenced − default, + "apart"} over an influence directory's seeds and worlds."""
-    spec, found = influence_values(Path(influence_dir), prefix)
+def pooled_influenced_vs_default(influence_dir: str | Path, prefix: str = "", resamples: int = 2000, seeds=None) -> dict:
+    """{statistic: pooled_difference of influenced − default, + "apart"} over an influence directory's seeds (or
+    ``seeds``) and worlds."""
+    spec, found = influence_values(Path(influence_dir), prefix, seeds)
     statistics = {f"mean_{name}": (name, lambda v: float(v.mean())) for name in found["default"][0] if name not in ("score", "failing")}
     statistics |= {"cvar10": ("score", lambda v: float(cvar(v, CVAR_ALPHA, axis=1).mean())), "p_failure": ("failing", lambda v: float(v.mean()))}
     out = {"failure": spec.failure, "score": spec.metrics.main, "seeds": len(found["default"]), "worlds": len(found["default"][0]["score"])}

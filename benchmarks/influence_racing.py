@@ -463,6 +463,7 @@ def main(argv=None) -> dict:
         for label, runs in result["per_seed"].items()
     }
     summary_trained = summarise(trained, list(result["summary"]))
+    trained_seeds = [seed for seed in args.seeds if not {f"default-s{seed}", f"influenced-s{seed}"} & set(result["failed_training"])]
     heldout = args.heldout == "on" or (args.heldout == "auto" and selection == OUR_SELECTION)
     held = heldout_evaluation(influence_dir, setup, result, selection, args.heldout_search_budget, progress) if heldout else None
     replayed = selected_world_rates(influence_dir, setup, result)
@@ -513,7 +514,13 @@ def main(argv=None) -> dict:
         "summary": summary,
         "intervals": comparison(summary),
         "pooled_influenced_vs_default": pooled_influenced_vs_default(influence_dir),  # paired by world, pooled over seeds
-        "without_failed_training": {"summary": summary_trained, "intervals": comparison(summary_trained)},
+        "without_failed_training": {
+            "seeds": trained_seeds,
+            "summary": summary_trained,
+            "intervals": comparison(summary_trained),
+            # the same pairing, leaving out every seed where either arm failed to train (both arms alike)
+            "pooled_influenced_vs_default": pooled_influenced_vs_default(influence_dir, seeds=trained_seeds) if trained_seeds != args.seeds else None,
+        },
         "reward_change_pct": round(100 * (reward["influenced"]["mean"] / reward["default"]["mean"] - 1), 2),
         "heldout": held,
         "selected_worlds_replayed": replayed,

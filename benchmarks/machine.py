@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import resource
 import time
 from pathlib import Path
 
@@ -56,6 +57,12 @@ def describe_machine() -> dict:
         "backend": jax.default_backend(),
         "devices": [str(d.device_kind) for d in jax.devices()],
     }
+
+
+def children_cpu() -> float:
+    """CPU seconds (user + sys) of this process's finished children: load-independent where wall time is not."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def record(name: str, result: dict) -> Path:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import subprocess
 import sys
@@ -23,14 +22,10 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import record  # noqa: E402
+from machine import children_cpu, record  # noqa: E402
+from worldagent.reproduce.pipeline import CHAINS  # noqa: E402
 
 TARGET_WALL_S = 600
-
-
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def phase_seconds(manifest: dict) -> dict[str, float]:
@@ -66,8 +61,8 @@ def main() -> None:
 
 
 def chain_seconds(phases: dict[str, float]) -> dict[str, float]:
-    """Each env's training chain (dataset, generator, agent, influence) and evaluation chain (the rest), summed."""
-    training = ("dataset", "generator", "agent", "influence")
+    """Each env's training chain and evaluation chain (``reproduce.pipeline.CHAINS``), summed."""
+    training, _ = CHAINS
     chains: dict[str, float] = {}
     for name, seconds in phases.items():
         env, _, phase = name.partition("/")

@@ -34,6 +34,9 @@ def root(
     version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."),
 ) -> None:
     """Find the worlds in which trained RL agents fail or shine, and reshape what they train on."""
+    from worldagent.compilation import use_compilation_cache
+
+    use_compilation_cache()  # compiled programs are kept on disk for the next command (worldagent.compilation)
 
 
 register_all(app)

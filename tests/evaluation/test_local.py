@@ -64,10 +64,22 @@ def test_an_external_agent_goes_to_the_host_evaluator_with_the_same_output(world
     calls = []
     host = evaluate(RACING, HostPolicy(lambda obs: calls.append(obs.shape) or np.full(len(obs), 2), RACING.num_actions), worlds, 2, jax.random.key(0))
     # one call per step for all 6 worlds x 2 repeats, padded to the evaluator's one batch size
-    assert calls[0] == (episodes_per_call(), *RACING.observation_shape)
+    assert calls[0] == (episodes_per_call(RACING), *RACING.observation_shape)
     assert set(host) == set(jitted)
     for name in jitted:
         np.testing.assert_array_equal(host[name], jitted[name])
+
+
+def test_an_env_sets_its_own_call_size_on_a_cpu_and_the_variable_still_wins(monkeypatch):
+    """Harvest's episodes all run max_steps, so its calls hold 64 episodes; racing keeps the evaluator's 256."""
+    monkeypatch.delenv("WORLDAGENT_EPISODES_PER_CALL")  # the tests' own small calls
+    env, shapes = Harvest(), []
+    params = make_params().replace(max_steps=3)
+    host = HostPolicy(lambda obs: shapes.append(obs.shape[0]) or np.zeros(obs.shape[0], int), env.num_actions)
+    evaluate(env, host, generate_maps(np.arange(9)), 8, jax.random.key(0), params)  # 72 episodes: two calls of 64
+    assert set(shapes) == {64} and episodes_per_call(env) == 64 and episodes_per_call(RACING) == 256
+    monkeypatch.setenv("WORLDAGENT_EPISODES_PER_CALL", "32")
+    assert episodes_per_call(env) == episodes_per_call(RACING) == 32
 
 
 def test_harvest_metrics_per_episode_and_per_agent():

@@ -20,6 +20,7 @@ from worldagent.reproduce.pipeline import (
     concurrent_envs,
     finished,
     next_tasks,
+    one_thread_flags,
     run_env_processes,
 )
 from worldagent.reproduce.presets import PHASES
@@ -99,6 +100,14 @@ def test_envs_run_one_per_core_on_a_cpu_and_one_at_a_time_otherwise():
     assert concurrent_envs(2, 16, "cpu", sequential=True, can_share=True) == 1
     assert concurrent_envs(2, 16, "gpu", sequential=False, can_share=True) == 1  # each process would claim the device
     assert concurrent_envs(2, 16, "cpu", sequential=False, can_share=False) == 1  # no flock: one manifest writer
+
+
+def test_env_processes_compute_on_one_thread_unless_the_users_flags_say_otherwise():
+    assert one_thread_flags("") == "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    assert one_thread_flags("--xla_force_host_platform_device_count=2") == (
+        "--xla_force_host_platform_device_count=2 --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    )
+    assert one_thread_flags("--xla_cpu_multi_thread_eigen=true") == "--xla_cpu_multi_thread_eigen=true intra_op_parallelism_threads=1"
 
 
 def test_one_env_shows_its_progress_bars_at_a_time():

@@ -59,6 +59,15 @@ def test_a_budget_change_touches_only_its_phase():
     assert changed.phase_config("harvest", "random") == QUICK.phase_config("harvest", "random")
 
 
+def test_a_presets_own_training_settings_reach_its_agents_and_set_wins_over_them():
+    """Harvest's quick DQN halves the minibatch (the budgets' settings); ``--set`` overrides it, for that algorithm only."""
+    assert QUICK.settings_of("harvest")["batch_size"] == 64 and QUICK.phase_config("harvest", "influence")["settings"]["batch_size"] == 64
+    assert "settings" not in PAPER.phase_config("harvest", "agent")
+    changed = QUICK.with_settings({"dqn": {"batch_size": 32}, "ppo": {"learning_rate": 1e-3}})
+    assert changed.settings_of("harvest")["batch_size"] == 32 and changed.settings_of("harvest")["epsilon_decay_fraction"] == 1.0
+    assert changed.settings_of("racing") == {"learning_rate": 1e-3}
+
+
 def test_algo_overrides_only_the_envs_that_have_it():
     acktr, ppo = TINY.with_algo("acktr"), PAPER.with_algo("ppo")
     assert (TINY.algo_of("racing"), acktr.algo_of("racing"), acktr.algo_of("harvest")) == ("ppo", "acktr", "dqn")

@@ -398,22 +398,28 @@ def train(
         spec, algo, config, distribution, out_dir, seed=seed, options=options, params=params, resume=resume,
         distribution_spec=distribution_spec, chunk_updates=chunk_updates,
     )  # fmt: skip
-    trainer, total = run.trainer, int(run.config.episodes)
-    start = time.perf_counter()
+    total = int(run.config.episodes)
     with progress_bar(f"training {algo} on {run.spec.name}", total=total, enabled=progress) as advance:
         advance(min(int(run.state.episodes), total))
-        chunks = 0
-        try:
-            while not bool(trainer.done(run.state)) and (stop_after_chunks is None or chunks < stop_after_chunks):
-                chunks += 1
-                before = int(run.state.episodes)
-                state, curve = trainer.train_chunk(run.state, run.chunk_updates)
-                record_chunk(run, state, jax.device_get(curve), time.perf_counter() - start)
-                keep_snapshot(run, before, keep_every)
-                advance(min(int(state.episodes), total) - min(before, total), **status(run))
-        finally:
-            checkpoint(run)
-    return finish_run(run, time.perf_counter() - start)
+        wall = run_chunks(run, stop_after_chunks, advance, keep_every)
+    return finish_run(run, wall)
+
+
+def run_chunks(run: OpenRun, stop_after_chunks: int | None, advance, keep_every: int | None = None) -> float:
+    """Train ``run`` chunk by chunk until its budget is spent (or ``stop_after_chunks``), recording each chunk and
+    checkpointing at the end; ``advance(episodes, **status)`` after each. Its wall seconds."""
+    total, start, chunks = int(run.config.episodes), time.perf_counter(), 0
+    try:
+        while not bool(run.trainer.done(run.state)) and (stop_after_chunks is None or chunks < stop_after_chunks):
+            chunks += 1
+            before = int(run.state.episodes)
+            state, curve = run.trainer.train_chunk(run.state, run.chunk_updates)
+            record_chunk(run, state, jax.device_get(curve), time.perf_counter() - start)
+            keep_snapshot(run, before, keep_every)
+            advance(min(int(state.episodes), total) - min(before, total), **status(run))
+    finally:
+        checkpoint(run)
+    return time.perf_counter() - start
 
 
 def _new_rows(curve: dict, update: int, elapsed: float) -> list[dict]:

@@ -13,7 +13,7 @@ Per-episode metrics are accumulated in ``state`` so that evaluation never stores
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -23,9 +23,15 @@ from worldagent.errors import WorldagentError
 
 
 class Environment:
-    """Base class of the pure-JAX environments; subclasses are frozen dataclasses."""
+    """Base class of the pure-JAX environments; subclasses are frozen dataclasses.
+
+    ``cpu_episodes_per_call``: episodes one compiled evaluation call plays on a CPU (None: the
+    evaluator's default, ``evaluation.local.EPISODES_PER_CALL``). An env whose episodes all run the same
+    number of steps plays them as fast in smaller calls, which pad a search's small batches less.
+    """
 
     num_agents: int = 1
+    cpu_episodes_per_call: ClassVar[int | None] = None
 
     @property
     def default_params(self) -> Any:

@@ -7,11 +7,11 @@ jitted ``vmap(while_loop)`` over episodes × steps. An episode's loop stops when
 is stored: the metrics accumulate in the env state. With several local devices (a host with 8
 GPUs) each call is sharded over all of them.
 
-**Batch invariance.** Every compiled call plays exactly ``episodes_per_call()`` episodes per
+**Batch invariance.** Every compiled call plays exactly ``episodes_per_call(env)`` episodes per
 device, each with its own world and key (the last episode repeated as padding). XLA fuses a
 program differently for different shapes, and on CPU a multiply-add fused into an FMA in one
 program but not in another changes the last bit of, say, racing's lap fraction; a near-tie in
-an agent's action then sends the episode elsewhere. One shape for every call means one
+an agent's action then sends the episode elsewhere. One shape for every call of an env means one
 program, so an episode's metrics depend only on its world, key and agent: never on how many
 worlds came with it, how a backend split them, or how many devices ran them. The same holds
 for external agents, whose own matrix products may also depend on the batch they get.
@@ -79,20 +79,24 @@ def episode_keys(key: jax.Array, worlds: int, repeats: int) -> jax.Array:
     return jax.random.split(key, (worlds, repeats))
 
 
-def episodes_per_call() -> int:
-    """Episodes one compiled call plays on each device (``WORLDAGENT_EPISODES_PER_CALL`` overrides)."""
+def episodes_per_call(env: Environment | None = None) -> int:
+    """Episodes one compiled call plays on each device: ``WORLDAGENT_EPISODES_PER_CALL`` if set, else on a CPU
+    ``env.cpu_episodes_per_call`` where the env declares it, else the device's default."""
     given = os.environ.get("WORLDAGENT_EPISODES_PER_CALL")
     if given:
         if not given.isdigit() or int(given) < 1:
             raise WorldagentError(f"WORLDAGENT_EPISODES_PER_CALL={given!r}; set it to a positive whole number, or unset it.")
         return int(given)
-    return EPISODES_PER_CALL.get(jax.default_backend(), ACCELERATOR_EPISODES_PER_CALL)
+    backend = jax.default_backend()
+    if backend == "cpu" and getattr(env, "cpu_episodes_per_call", None):
+        return int(env.cpu_episodes_per_call)
+    return EPISODES_PER_CALL.get(backend, ACCELERATOR_EPISODES_PER_CALL)
 
 
-def episode_calls(total: int) -> list[tuple[int, np.ndarray]]:
-    """``(count, episodes)`` per compiled call: ``episodes`` are always ``episodes_per_call()`` x devices
+def episode_calls(total: int, env: Environment | None = None) -> list[tuple[int, np.ndarray]]:
+    """``(count, episodes)`` per compiled call: ``episodes`` are always ``episodes_per_call(env)`` x devices
     indices into ``range(total)``, the first ``count`` real and the rest repeats of the last."""
-    size = episodes_per_call() * len(jax.local_devices())
+    size = episodes_per_call(env) * len(jax.local_devices())
     calls = []
     for start in range(0, total, size):
         real = np.arange(start, min(start + size, total))
@@ -156,17 +160,17 @@ def play_episodes(env: Environment, policy, worlds: Any, world_of: np.ndarray, k
     if getattr(policy, "host", False):
         from worldagent.evaluation.host import evaluate_host
 
-        return in_calls(lambda part, part_keys: evaluate_host(env, policy, part, part_keys, params, num_steps), worlds, world_of, keys)
+        return in_calls(lambda part, part_keys: evaluate_host(env, policy, part, part_keys, params, num_steps), worlds, world_of, keys, env)
     compiled = _compiled(env, num_steps)
-    return in_calls(lambda part, part_keys: compiled(policy, *on_all_devices((part, part_keys)), params), worlds, world_of, keys)
+    return in_calls(lambda part, part_keys: compiled(policy, *on_all_devices((part, part_keys)), params), worlds, world_of, keys, env)
 
 
-def in_calls(run: Callable[[Any, jax.Array], Any], worlds: Any, world_of: np.ndarray, keys: jax.Array) -> Any:
+def in_calls(run: Callable[[Any, jax.Array], Any], worlds: Any, world_of: np.ndarray, keys: jax.Array, env: Environment | None = None) -> Any:
     """``run(worlds[E], keys[E]) -> arrays [E, ...]`` over every episode, in calls of one fixed E
-    (``episode_calls``); episode e is played on ``worlds[world_of[e]]``, results in episode order."""
+    (``episode_calls(_, env)``); episode e is played on ``worlds[world_of[e]]``, results in episode order."""
     world_of = np.asarray(world_of)
     parts = []
-    for count, episodes in episode_calls(len(world_of)):
+    for count, episodes in episode_calls(len(world_of), env):
         part = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[world_of[episodes]], worlds)
         parts.append(jax.tree_util.tree_map(lambda value: np.asarray(value)[:count], run(part, keys[episodes])))
     return jax.tree_util.tree_map(lambda *values: np.concatenate(values), *parts)

@@ -110,7 +110,7 @@ def _replay_host(env: Environment, trace, policy, world: Any, keys: jax.Array, p
 
     worlds = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], world)
     run = lambda part, part_keys: host_rollouts(env, policy, part, part_keys, params, num_steps, trace)  # noqa: E731
-    metrics, steps, (positions, present) = in_calls(run, worlds, np.zeros(len(keys), int), keys)
+    metrics, steps, (positions, present) = in_calls(run, worlds, np.zeros(len(keys), int), keys, env)
     return positions, present, steps, metrics
 
 

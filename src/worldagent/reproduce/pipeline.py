@@ -44,6 +44,11 @@ from worldagent.reproduce.presets import PHASES, Preset, paper_phase_config
 
 TOLERATED = ("influence",)  # phases whose failure is a result, not the end of the run
 SEQUENTIAL_VARIABLE = "WORLDAGENT_SEQUENTIAL_ENVS"  # set (to anything but "" or "0"): one env after another
+# XLA flags of the env processes that share a CPU's cores: each computes on one thread. Eigen's threads in every
+# process would contend for the same cores; with one each, two processes at once played harvest's episodes and trained
+# its DQN about 11% faster, a VAE's steps as fast (benchmarks/results/concurrent-threads-cpu.json). A flag the user's
+# XLA_FLAGS names wins.
+ONE_THREAD_FLAGS = ("--xla_cpu_multi_thread_eigen=false", "intra_op_parallelism_threads=1")
 PARENT_POLL_S = 1.0  # how often an env's process checks that the run's process is still there
 STOP_WAIT_S = 60.0  # after Ctrl-C, how long env processes get to record where they stopped before they are told again
 
@@ -239,9 +244,9 @@ def run_env_processes(
     preset: Preset, out: Path, tasks: list[Task], at_once: int, progress: bool, echo: Callable[[str], None], work: Callable = run_env
 ) -> None:
     """Run ``tasks`` (``env_tasks``; ``work``: ``run_env``), each in a process of its own (spawned: JAX's state and
-    numpy's parser are per process), ``at_once`` at a time, each once the phases it needs are done; status lines are echoed
-    here. A task that fails stops only itself (and what needs it); once none can run, the failures are raised as one
-    ``EnvFailed`` (every finished phase is in the manifest). Ctrl-C (or this process's end) stops them all, each
+    numpy's parser are per process), ``at_once`` at a time, each once the phases it needs are done, each computing on one
+    thread (``ONE_THREAD_FLAGS``); status lines are echoed here. A task that fails stops only itself (and what needs it);
+    once none can run, the failures are raised as one ``EnvFailed`` (every finished phase is in the manifest). Ctrl-C (or this process's end) stops them all, each
     recording where it stopped, so a rerun resumes."""
     import multiprocessing
 
@@ -255,7 +260,8 @@ def run_env_processes(
                 waiting.remove(task)
                 args = (preset, str(out), task.env, progress, messages, bars, os.getpid(), work, task.phases)
                 running[task] = context.Process(target=env_process, args=args, name=f"worldagent-reproduce-{task.env}")
-                running[task].start()
+                with child_environment("XLA_FLAGS", one_thread_flags(os.environ.get("XLA_FLAGS", ""))):
+                    running[task].start()
             if not running:
                 break
             relay(messages, echo, failures, wait=0.5)
@@ -274,6 +280,27 @@ def run_env_processes(
         note(failures, task.env, f"{', '.join(task.phases)} not run: {', '.join(task.needs)} did not finish")
     if failures:
         raise EnvFailed("; ".join(f"{env}: {why}" for env, why in failures.items()))
+
+
+def one_thread_flags(flags: str) -> str:
+    """``flags`` (``XLA_FLAGS``) with ``ONE_THREAD_FLAGS`` added where it names none of their settings."""
+    named = {flag.split("=")[0].lstrip("-") for flag in flags.split()}
+    added = [flag for flag in ONE_THREAD_FLAGS if flag.split("=")[0].lstrip("-") not in named]
+    return " ".join([*flags.split(), *added])
+
+
+@contextmanager
+def child_environment(variable: str, value: str) -> Iterator[None]:
+    """``os.environ[variable]`` set to ``value`` while processes are spawned (they copy it), then restored."""
+    before = os.environ.get(variable)
+    os.environ[variable] = value
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(variable, None)
+        else:
+            os.environ[variable] = before
 
 
 def relay(messages, echo: Callable[[str], None], failures: dict[str, str], wait: float) -> None:

@@ -74,6 +74,8 @@ class EnvBudgets:
             paper preset: the paper's observation, ``observation="rays"``).
         algo: this env's training algorithm at this preset ("": ``spec.default_algorithm``;
             ``reproduce --algo`` overrides both).
+        settings: ``{algo: {config field: value}}`` of this env's agents at this preset (ours), over the
+            algorithm's defaults and the env's overrides; ``reproduce --set`` wins over them.
         influence_selection: the property of the influenced training worlds ("": the paper's,
             ``spec.selection``). Our racing agents crash 5–20× less often than the paper's (crash
             rate 0.005–0.07 against 0.11), so worlds with a crash rate above 0.5 are rare or
@@ -106,6 +108,7 @@ class EnvBudgets:
     failure_worlds: int = 0
     options: Mapping[str, Any] = field(default_factory=dict)
     algo: str = ""
+    settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -143,7 +146,7 @@ class Preset:
         algo: the training algorithm for every env whose ``spec.algorithms`` has it (``--algo``);
             None: each env's ``EnvBudgets.algo``, else its ``spec.default_algorithm``.
         settings: ``{algo: {config field: value}}`` set on every agent trained with ``algo``
-            (``reproduce --set``, ``algorithms.parse_settings``), over the env's own settings and
+            (``reproduce --set``, ``algorithms.parse_settings``), over the env's own settings, the budgets' ``settings`` and
             the budgets' ``train_envs`` / ``learning_starts``.
         curriculum: the curriculum of every env's agent (``reproduce --curriculum``); checked per
             env by ``check_curriculum`` before any phase runs.
@@ -279,8 +282,10 @@ class Preset:
         return late_replay_warning(make_curriculum_of(env, request, None), self.budgets(env).episodes)
 
     def settings_of(self, env: str) -> dict[str, Any]:
-        """The config fields ``--set`` gives ``env``'s agents (those of its algorithm)."""
-        return dict(self.settings.get(self.algo_of(env), {}))
+        """The config fields this preset sets on ``env``'s agents (those of its algorithm): the budgets' own
+        (``EnvBudgets.settings``), then ``--set``'s."""
+        algo = self.algo_of(env)
+        return {**self.budgets(env).settings.get(algo, {}), **self.settings.get(algo, {})}
 
     def phase_config(self, env: str, phase: str) -> dict:
         """The settings phase ``phase`` of ``env`` depends on (compared when a run resumes)."""
@@ -300,7 +305,7 @@ class Preset:
                 "train_envs": b.train_envs,
                 "learning_starts": b.learning_starts,
                 **({"options": options} if options else {}),
-                **({"settings": self.settings_of(env)} if self.settings_of(env) else {}),  # absent without --set: earlier runs still match
+                **({"settings": self.settings_of(env)} if self.settings_of(env) else {}),  # absent when none: earlier runs still match
                 **({"curriculum": self.curriculum_of(env)} if self.curriculum_of(env) else {}),  # absent for dr, likewise
             },
             "random": {"worlds": b.random_worlds, "repeats": self.repeats},

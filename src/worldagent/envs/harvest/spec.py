@@ -306,23 +306,26 @@ SPEC = register(
                 failure_worlds=2_000,
                 influence_search_budget=525,
             ),
-            "quick": _budgets(
+            "quick": _budgets(  # sized to 10 minutes on 2 cores with racing's (docs/main-job.md)
                 worlds=5_000,
-                vae_epochs=100,
-                episodes=1_000,
-                random_worlds=200,
-                strategic_budget=105,
-                compare_budget=42,
+                vae_epochs=20,  # held-out loss is lowest at epoch 20: the VAE early stopping kept of 100 epochs
+                episodes=600,
+                random_worlds=100,
+                strategic_budget=63,
+                compare_budget=21,  # one CMA-ES generation: ES, BO and random search at equal budgets
                 bo_budget=21,
                 compare_seeds=(0,),
-                influence_candidates=200,
-                influence_episodes=1_000,  # 400: the tagger barely tags; 1,500-2,000 did not help where it is walled in (docs/harvest.md)
+                influence_candidates=100,
+                influence_episodes=500,
                 influence_eval_worlds=50,
                 influence_seeds=(0,),
-                atlas_budget=105,
-                failure_worlds=100,
-                influence_search_budget=210,
+                atlas_budget=105,  # at least the atlas's 100 cells
+                failure_worlds=50,
+                influence_search_budget=42,
                 learning_starts=4_000,
+                # half the minibatch: 2/3 of the training's cost, agents about as good at 600 episodes
+                # (benchmarks/results/harvest-dqn-budget.json); epsilon decays over each agent's whole budget
+                settings={"dqn": {"batch_size": 64, "epsilon_decay_episodes": None, "epsilon_decay_fraction": 1.0}},
             ),
             "tiny": _budgets(
                 worlds=256,

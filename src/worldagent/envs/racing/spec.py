@@ -327,21 +327,21 @@ SPEC = register(
                 options={"observation": "rays"},  # the paper's agent: its surroundings, position and directional speed
                 algo="acktr",
             ),
-            "quick": _budgets(
+            "quick": _budgets(  # sized to 10 minutes on 2 cores with harvest's (docs/main-job.md)
                 worlds=10_000,
-                vae_epochs=10,
-                episodes=10_000,
+                vae_epochs=4,
+                episodes=6_000,
                 random_worlds=1_000,
                 strategic_budget=420,
-                compare_budget=210,
-                bo_budget=42,
+                compare_budget=105,
+                bo_budget=21,
                 compare_seeds=(0, 1),
-                influence_candidates=500,
-                influence_episodes=10_000,
-                influence_eval_worlds=200,
+                influence_candidates=300,  # 200 selected 33 worlds, too few to train on: the agent parked
+                influence_episodes=3_000,
+                influence_eval_worlds=150,
                 influence_seeds=(0,),
-                atlas_budget=420,
-                failure_worlds=1_000,
+                atlas_budget=105,  # at least the atlas's 100 cells
+                failure_worlds=500,
                 influence_selection="crash_rate > 0",
             ),
             "tiny": _budgets(

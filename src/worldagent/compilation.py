@@ -7,8 +7,9 @@ rerun, a resumed run, and the same evaluation program compiled in two env chains
 is the program XLA would compile, so results are the same bit for bit.
 
 ``WORLDAGENT_COMPILATION_CACHE`` names its directory (``""`` or ``0``: no cache); without it JAX's own
-``JAX_COMPILATION_CACHE_DIR`` is used as set, else ``$XDG_CACHE_HOME/worldagent/xla`` (``~/.cache/...``),
-kept under ``MAX_BYTES`` (JAX drops the least recently used programs).
+``JAX_COMPILATION_CACHE_DIR`` is used as set, else ``$XDG_CACHE_HOME/worldagent/xla`` (``~/.cache/...``).
+It is not capped: a quick run writes about 5 MB, and capping it needs the ``filelock`` package, which JAX
+asks for on every read (a fresh install warned). Delete the folder to empty it.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ import os
 from pathlib import Path
 
 VARIABLE = "WORLDAGENT_COMPILATION_CACHE"
-MAX_BYTES = 2 * 1024**3
 
 
 def cache_dir() -> Path | None:
@@ -44,5 +44,4 @@ def use_compilation_cache() -> Path | None:
 
     os.environ["JAX_COMPILATION_CACHE_DIR"] = str(directory)  # spawned processes (reproduce's env chains) read it
     jax.config.update("jax_compilation_cache_dir", str(directory))
-    jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)
     return directory

@@ -17,7 +17,8 @@ event) are confirmed on 32 fresh episodes each, and the confirmed failing cells 
 Recorded per seed and method: the confirmed value of the reported world with its 95% interval, the found value
 (the selection's, on its pooled episodes), whether the reported world is confirmed failing, the atlas's
 failing cells (found and confirmed), and the episodes spent (search + confirmation). BO variants run with a
-cheaper acquisition search than the default (``BO``), the same for both, to fit the machine's time.
+cheaper acquisition search than the default (``BO``), the same for both, to fit the machine's time; ``--bo library``
+runs them with the library's defaults (``OptimiserConfig()``: what ``worldagent strategic`` and ``reproduce`` use).
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from worldagent.store import RunStore  # noqa: E402
 POINT = ("cmaes", "bo", "random", "cmaes-re", "bo-noise")
 ATLAS = ("atlas", "atlas-corrected", "atlas-adaptive")
 BO = OptimiserConfig(bo_candidates=500, bo_starts=1, bo_gp_restarts=1)
+BO_SETTINGS = {"benchmark": BO, "library": OptimiserConfig()}  # --bo
 PART = "noisy-search-{env}.json"
 # (a, b): confirmed value of a minus b per seed; the searches minimise, so negative means a found worse worlds
 PAIRS = (
@@ -64,9 +66,9 @@ def objective_of(setup) -> LatentObjective:
     return LatentObjective(Objective(setup.spec.name, metric, False), setup.env, setup.policy, setup.generator, setup.repeats, setup.params)
 
 
-def run_point(store, setup, method: str, budget: int, seed: int):
-    """One point search; returns (its evaluations, its reported evaluation)."""
-    config = BO if method.startswith("bo") else OptimiserConfig()
+def run_point(store, setup, method: str, budget: int, seed: int, bo: str = "benchmark"):
+    """One point search (``bo``: BO's settings, a key of ``BO_SETTINGS``); returns (its evaluations, its reported evaluation)."""
+    config = BO_SETTINGS[bo] if method.startswith("bo") else OptimiserConfig()
     dim = setup.generator.latent_dim
     name = f"{method}-s{seed}"
     spec = CampaignSpec(name, setup.spec.name, setup.spec.metrics.main, False, method, budget, seed, dim, config, agent=agent_record(setup.policy))
@@ -104,9 +106,12 @@ def pooled_by_latent(evaluations) -> dict:
     return {key: reported_evaluation(group, False) for key, group in groups.items()}
 
 
-def one(store, setup, method: str, budget: int, seed: int, selection, elites: int) -> dict:
+def one(store, setup, method: str, budget: int, seed: int, selection, elites: int, bo: str = "benchmark") -> dict:
     start = time.perf_counter()
-    found, reported, cells = (run_atlas if method in ATLAS else run_point)(store, setup, method, budget, seed)
+    if method in ATLAS:
+        found, reported, cells = run_atlas(store, setup, method, budget, seed)
+    else:
+        found, reported, cells = run_point(store, setup, method, budget, seed, bo)
     searched = time.perf_counter() - start
     metric = setup.spec.metrics.main
     [world] = confirm(store, setup, [reported], name=f"reported:{method}-s{seed}", repeats=REPEATS, seed=seed, progress=False)
@@ -192,7 +197,7 @@ def run_env(args) -> None:
             for method in methods:
                 if method in per_seed.get(str(seed), {}):
                     continue
-                row = one(store, setup, method, args.budget, seed, selection, args.elites)
+                row = one(store, setup, method, args.budget, seed, selection, args.elites, args.bo)
                 per_seed.setdefault(str(seed), {})[method] = row
                 print(
                     f"{args.env} s{seed} {method}: found {row['found']['mean']:.4g} confirmed {row['confirmed']['mean']:.4g} ({row['seconds']} s)",
@@ -211,7 +216,7 @@ def run_env(args) -> None:
         "confirm_repeats": REPEATS,
         "elite_repeats": ELITE_REPEATS,
         "elites_confirmed_at_most": args.elites,
-        "bo_config": {"bo_candidates": BO.bo_candidates, "bo_starts": BO.bo_starts, "bo_gp_restarts": BO.bo_gp_restarts},
+        "bo_config": {name: getattr(BO_SETTINGS[args.bo], name) for name in ("bo_candidates", "bo_starts", "bo_gp_restarts")},
         "command": " ".join(sys.argv),
         "wall_seconds_this_call": round(time.time() - started, 1),
         "machine": describe_machine(),
@@ -255,6 +260,7 @@ def main() -> None:
     parser.add_argument("--methods", nargs="+")
     parser.add_argument("--elites", type=int, default=8, help="failing elites confirmed per atlas, at most")
     parser.add_argument("--work", type=Path, default=Path("runs/noisy-search"))
+    parser.add_argument("--bo", choices=tuple(BO_SETTINGS), default="benchmark", help="BO's acquisition settings (see the docstring)")
     parser.add_argument("--merge", action="store_true")
     parser.add_argument("--note", default="", help="with --merge: what the JSON should say about the run (e.g. the machine's load)")
     args = parser.parse_args()

@@ -35,6 +35,7 @@ def test_envs_lists_every_registered_environment():
     assert text.startswith("racing:") and "\nharvest:" in text
     assert "main: return" in text and "crash_rate = crashed" in text and "ppo (default), acktr" in text and "driver, random" in text
     assert "main: group_reward" in text and "dqn (default)" in text and "tagger" in text and "greedy" in text
+    assert "optimiser:   cmaes" in text.split("\nharvest:")[0] and "optimiser:   bo" in text.split("\nharvest:")[1]
 
 
 def test_worlds_draws_a_sheet_of_any_environment(tmp_path):

@@ -9,6 +9,7 @@ worlds, a step limit of ``STEPS``.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -90,6 +91,12 @@ def test_repair_makes_dataset_cells_valid_worlds(subject):
 
 def test_declared_algorithms_pictures_and_presets(subject):
     passes(declared.declared_usable, subject)
+
+
+def test_an_unknown_default_optimiser_fails_the_declared_check(subject, monkeypatch):
+    monkeypatch.setattr(subject, "spec", dataclasses.replace(subject.spec, optimiser="annealing"))
+    result = declared.declared_usable(subject)
+    assert not result.passed and "optimiser 'annealing': use one of cmaes, bo, random" in result.reason
 
 
 def test_actor_critic_algorithms_get_a_flat_observation(subject):

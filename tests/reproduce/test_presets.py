@@ -68,6 +68,14 @@ def test_a_presets_own_training_settings_reach_its_agents_and_set_wins_over_them
     assert changed.settings_of("racing") == {"learning_rate": 1e-3}
 
 
+def test_the_strategic_phase_searches_with_the_envs_optimiser_and_the_paper_preset_with_cmaes():
+    """Harvest's searches default to BO (it found lower worlds on fresh episodes); its paper preset keeps the paper's CMA-ES."""
+    assert registry.get("harvest").optimiser == "bo" and registry.get("racing").optimiser == "cmaes"
+    assert QUICK.phase_config("harvest", "strategic")["optimiser"] == "bo"
+    assert QUICK.phase_config("racing", "strategic")["optimiser"] == "cmaes"
+    assert PAPER.phase_config("harvest", "strategic")["optimiser"] == "cmaes"
+
+
 def test_algo_overrides_only_the_envs_that_have_it():
     acktr, ppo = TINY.with_algo("acktr"), PAPER.with_algo("ppo")
     assert (TINY.algo_of("racing"), acktr.algo_of("racing"), acktr.algo_of("harvest")) == ("ppo", "acktr", "dqn")

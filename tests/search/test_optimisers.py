@@ -272,3 +272,16 @@ def test_adaptive_sampling_lets_a_challenger_in_only_on_its_pooled_mean():
     fresh.pooled.add(np.vstack([challenger, challenger, fluke]), np.array([0.0, -0.5, 4.0]))  # -0.5 over 3; the fluke: +1
     fresh.settle()
     assert fresh.cells[0] == challenger.tobytes() and fresh.challengers == []
+
+
+def test_a_search_defaults_to_the_envs_optimiser_and_that_optimisers_budget():
+    """Unset, ``--optimiser`` is the env's (harvest: BO) and ``--budget`` that optimiser's; what is given wins."""
+    from worldagent.commands.options import search_settings
+    from worldagent.search.optimisers import DEFAULT_BUDGETS
+
+    assert search_settings("harvest", None, None) == ("bo", DEFAULT_BUDGETS["bo"]) == ("bo", 210)
+    assert search_settings("racing", None, None) == ("cmaes", 2_000)
+    assert search_settings("harvest", "cmaes", None) == ("cmaes", 2_000)
+    assert search_settings("racing", "bo", 63) == ("bo", 63)
+    with pytest.raises(WorldagentError, match="unknown optimiser 'annealing'"):
+        search_settings("racing", "annealing", None)

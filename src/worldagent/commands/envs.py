@@ -29,6 +29,7 @@ def describe(name: str) -> str:
         ),
         f"  repairs:     {repair_line(spec)}",
         f"  algorithms:  {algorithms}",
+        f"  optimiser:   {spec.optimiser} (strategic and search, unless --optimiser)",
         f"  policies:    {', '.join(spec.scripted) or 'none'} (scripted, for --agent)",
         *([f"  world sets:  {', '.join(spec.world_sets)} (for evaluate worlds --worlds NAME)"] if spec.world_sets else []),
         f"  presets:     {preset_line(spec.presets)}",

@@ -180,6 +180,21 @@ def check_optimiser(name: str) -> None:
         raise WorldagentError(f"unknown optimiser {name!r}; use one of: {', '.join(OPTIMISERS)}.")
 
 
+OPTIMISER_HELP = "cmaes (the paper's), bo or random; default: the env's (worldagent envs; harvest: bo, racing: cmaes)."
+BUDGET_HELP = "Worlds to evaluate (CMA-ES rounds up to whole generations); default 2,000, or 210 with bo (its cost grows with the worlds seen)."
+
+
+def search_settings(env: str, optimiser: str | None, budget: int | None) -> tuple[str, int]:
+    """``--optimiser`` and ``--budget`` of a search, each defaulted when unset: the env's optimiser
+    (``EnvSpec.optimiser``), that optimiser's budget (``search.optimisers.DEFAULT_BUDGETS``)."""
+    from worldagent.envs import registry
+    from worldagent.search.optimisers import DEFAULT_BUDGETS
+
+    optimiser = registry.get(env).optimiser if optimiser is None else optimiser
+    check_optimiser(optimiser)
+    return optimiser, DEFAULT_BUDGETS[optimiser] if budget is None else budget
+
+
 def check_training_episodes(episodes: int | None) -> None:
     """``--episodes`` of training: unset (the algorithm's budget), or from 1 to ``TRAINING_EPISODES_CAP``."""
     if episodes is not None:

@@ -9,11 +9,12 @@ import typer
 from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
+    BUDGET_HELP,
     GENERATOR_HELP,
+    OPTIMISER_HELP,
     backend_flag,
     check_counts,
     check_metric,
-    check_optimiser,
     check_run_dir,
     check_seed,
     command_setup,
@@ -21,6 +22,7 @@ from worldagent.commands.options import (
     metric_help,
     option_flag,
     ray_address_flag,
+    search_settings,
     stochastic_flag,
 )
 from worldagent.commands.strategic import check_confirm, check_prior_bound, confirm_flag, prior_bound_flag
@@ -37,8 +39,8 @@ def register(app: typer.Typer) -> None:
         generator: Path = typer.Option(..., "--generator", help=GENERATOR_HELP),
         objective: str = typer.Option("reward", "--objective", help=metric_help()),
         minimize: bool = typer.Option(False, "--minimize/--maximize", help="Direction of the search."),
-        optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes, bo or random."),
-        budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate (rounded up to whole CMA-ES generations)."),
+        optimiser: str = typer.Option(None, "--optimiser", help=OPTIMISER_HELP, show_default=False),
+        budget: int = typer.Option(None, "--budget", help=BUDGET_HELP, show_default=False),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         confirm: int = confirm_flag(),
         prior: str = prior_bound_flag(),
@@ -62,12 +64,12 @@ def register(app: typer.Typer) -> None:
         from worldagent.search.prior import prior_text
         from worldagent.store import RunStore
 
+        optimiser, budget = search_settings(env, optimiser, budget)
         check_counts(budget=budget, repeats=repeats)
         check_confirm(confirm)
         check_prior_bound(prior)
         check_seed(seed)
         check_metric(env, objective)
-        check_optimiser(optimiser)
         check_run_dir(out)
         setup = command_setup(
             env, agent, generator, option, greedy=greedy, stochastic=stochastic, repeats=repeats, backend_name=backend_name, ray_address=ray_address

@@ -15,11 +15,12 @@ import typer
 from worldagent.commands.console import console, friendly_errors
 from worldagent.commands.options import (
     AGENT_HELP,
+    BUDGET_HELP,
     GENERATOR_HELP,
+    OPTIMISER_HELP,
     backend_flag,
     check_counts,
     check_metric,
-    check_optimiser,
     check_run_dir,
     check_seed,
     command_setup,
@@ -27,6 +28,7 @@ from worldagent.commands.options import (
     metric_help,
     option_flag,
     ray_address_flag,
+    search_settings,
     stochastic_flag,
 )
 from worldagent.errors import WorldagentError
@@ -91,10 +93,10 @@ def register(app: typer.Typer) -> None:
         env: str = env_argument(),
         agent: str = typer.Option(..., "--agent", help=AGENT_HELP),
         generator: Path = typer.Option(..., "--generator", help=GENERATOR_HELP),
-        budget: int = typer.Option(2000, "--budget", help="Worlds to evaluate per direction (rounded up to whole CMA-ES generations)."),
+        budget: int = typer.Option(None, "--budget", help=f"Per direction. {BUDGET_HELP}", show_default=False),
         metric: str = typer.Option("reward", "--metric", help=metric_help()),
         random_worlds: int = typer.Option(1000, "--random-worlds", help="Random worlds for the reference distribution (the paper: 1,000)."),
-        optimiser: str = typer.Option("cmaes", "--optimiser", help="cmaes (the paper's), bo or random."),
+        optimiser: str = typer.Option(None, "--optimiser", help=OPTIMISER_HELP, show_default=False),
         repeats: int = typer.Option(8, "--repeats", help="Episodes per world (the paper: 8)."),
         confirm: int = confirm_flag(),
         prior: str = prior_bound_flag(),
@@ -114,12 +116,12 @@ def register(app: typer.Typer) -> None:
         from worldagent.reports.strategic import draw_strategic, strategic_lines, write_strategic_json
         from worldagent.store import RunStore
 
+        optimiser, budget = search_settings(env, optimiser, budget)
         check_counts(budget=budget, random_worlds=random_worlds, repeats=repeats)
         check_confirm(confirm)
         check_prior_bound(prior)
         check_seed(seed)
         metric = check_metric(env, metric)
-        check_optimiser(optimiser)
         check_run_dir(out)
         setup = command_setup(
             env, agent, generator, option, greedy=greedy, stochastic=stochastic, repeats=repeats, backend_name=backend_name, ray_address=ray_address

@@ -83,13 +83,15 @@ def repair_valid(subject: Subject) -> str:
     return f"{len(dataset)} worlds' own cells repaired to valid worlds under jit; rebuilt from JSON; unknown settings refused"
 
 
-@check("algorithms, pictures and presets are usable")
+@check("algorithms, optimiser, pictures and presets are usable")
 def declared_usable(subject: Subject) -> str:
     from worldagent.agents.algorithms import ALGORITHMS
+    from worldagent.search.optimisers import OPTIMISERS
 
     spec = subject.spec
     unknown = sorted(set(spec.algorithms) - set(ALGORITHMS))
     require(spec.algorithms and not unknown, f"algorithms {list(spec.algorithms)}: use some of {', '.join(ALGORITHMS)}")
+    require(spec.optimiser in OPTIMISERS, f"optimiser {spec.optimiser!r}: use one of {', '.join(OPTIMISERS)}")
     size = spec.pictures.world(subject.world(0), 48).size
     require(size == (48, 48), f"pictures.world(world, 48) draws {size}, not (48, 48)")
     require(all(hasattr(budgets, "keys") for budgets in spec.presets.values()), "every preset must be a mapping of budgets")
@@ -97,7 +99,7 @@ def declared_usable(subject: Subject) -> str:
         from worldagent.events import parse_selection
 
         parse_selection(spec.selection, spec.name)
-    return f"algorithms {', '.join(spec.algorithms)}; a 48 px picture; {len(spec.presets)} preset(s)" + (
+    return f"algorithms {', '.join(spec.algorithms)}; optimiser {spec.optimiser}; a 48 px picture; {len(spec.presets)} preset(s)" + (
         f"; selection {spec.selection!r}" if spec.selection else ""
     )
 

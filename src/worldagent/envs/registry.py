@@ -218,6 +218,10 @@ class EnvSpec:
             draws as read back off its worlds (racing: its 20 checkpoint draws), for comparing their
             spread under G(z) with fresh worlds' (``worlds.coverage``); None where they cannot be
             read back cheaply and defensibly.
+        optimiser: the search optimiser ``strategic`` and ``search`` use unless told (``--optimiser``),
+            and ``reproduce``'s strategic phase outside the paper preset: the paper's ``cmaes``, or the
+            one ``benchmarks/noisy_search.py`` found lower worlds with on fresh episodes at equal episode
+            budgets (harvest: ``bo``, in 5 of 5 seeds).
     """
 
     name: str
@@ -248,6 +252,7 @@ class EnvSpec:
     repairs: Mapping[str, Callable[[Any, Mapping[str, Any]], Any]] = field(default_factory=dict)
     world_sets: Mapping[str, Callable[[], Any]] = field(default_factory=dict)
     generator_params: Callable[[Any], Mapping[str, np.ndarray]] | None = None
+    optimiser: str = "cmaes"
 
     @property
     def default_algorithm(self) -> str:

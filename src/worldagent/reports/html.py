@@ -31,6 +31,7 @@ from worldagent.reports.page import CSS, esc, fmt, image, missing, number, phase
 from worldagent.reports.provenance import overview
 from worldagent.reports.results import Headline, env_results, headlines
 from worldagent.runs import Run
+from worldagent.search.names import OPTIMISER_WORDS
 
 REPORT_FILE = "report.html"
 # The result first (ours beside the paper's), then the figures behind it, provenance last and folded.
@@ -226,11 +227,17 @@ def strategic_section(run_dir: Path, results: dict) -> str:
             + PRIOR_NOTE
             + image(
                 res["layout"].figure("strategic"),
-                f"{env}: the worlds CMA-ES found minimising and maximising reward, against random worlds (cf. Figures 1, 6b)",
+                f"{env}: the worlds {searcher(res['min'].get('optimiser', 'cmaes'))} found minimising and maximising reward, "
+                "against random worlds (cf. Figures 1, 6b)",
             )
         )
 
     return per_env(results, "strategic", render, "min", "no strategic campaigns in the store")
+
+
+def searcher(optimiser: str) -> str:
+    """Who found a strategic world, in words: "CMA-ES", "Bayesian optimisation", "random search"."""
+    return "random search" if optimiser == "random" else OPTIMISER_WORDS.get(optimiser, optimiser or "the search")
 
 
 PRIOR_NOTE = (

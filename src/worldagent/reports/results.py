@@ -145,7 +145,8 @@ def store_results(spec, store, done: dict) -> dict:
             evaluations = store.evaluations(name)
             found = best_evaluation(evaluations, maximize)
             if found is not None:
-                out[label] = {**world_summary(spec, found, scale), "evaluated": len(evaluations)}
+                campaign = store.campaign(name)
+                out[label] = {**world_summary(spec, found, scale), "evaluated": len(evaluations), "optimiser": campaign.optimiser if campaign else ""}
                 confirmed = stored_confirmation(spec, store, found, done["strategic"]["outputs"].get("confirmation"))
                 if confirmed is not None:
                     out[label]["confirmed"] = confirmed_world_summary(spec, confirmed, scale)

@@ -293,8 +293,9 @@ def random_scores(ctx: EnvContext) -> np.ndarray:
 
 
 def strategic_phase(ctx: EnvContext) -> dict:
-    """CMA-ES searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b); both worlds confirmed
-    on fresh episodes (``analysis.confirm``), found beside confirmed in the outputs."""
+    """Searches for the worlds that minimise and maximise reward (§6.1.2, Figures 1, 6b; the paper's CMA-ES, or the env's
+    own optimiser: ``Preset.optimiser_of``); both worlds confirmed on fresh episodes (``analysis.confirm``), found
+    beside confirmed in the outputs."""
     from worldagent import experiments
     from worldagent.analysis.confirm import agent_key
     from worldagent.influence.statistics import json_safe
@@ -308,7 +309,7 @@ def strategic_phase(ctx: EnvContext) -> dict:
             ctx.metric,
             budget=ctx.budgets.strategic_budget,
             seed=ctx.seed,
-            optimiser="cmaes",
+            optimiser=ctx.preset.optimiser_of(ctx.env),
             progress=ctx.progress,
             resume=True,
             confirm=ctx.preset.confirm,

@@ -39,7 +39,7 @@ from queue import Empty
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.manifest import Manifest, can_share, phase_key
-from worldagent.reproduce.phases import CURRICULUM_DEPENDS, DEPENDS, PHASE_FUNCTIONS, EnvContext, compare_names, dependents
+from worldagent.reproduce.phases import CURRICULUM_DEPENDS, DEPENDS, OPTIMISERS, PHASE_FUNCTIONS, EnvContext, compare_names, dependents
 from worldagent.reproduce.presets import PHASES, Preset, paper_phase_config
 
 TOLERATED = ("influence",)  # phases whose failure is a result, not the end of the run
@@ -451,8 +451,9 @@ def store_campaigns(ctx: EnvContext, phases: list[str]) -> list[str]:
     """Names of the store campaigns written by ``phases``."""
     from worldagent import experiments
 
-    names = experiments.campaign_names(ctx.metric, ctx.seed)
-    found = [names["min"], names["max"]] if "strategic" in phases else []
+    found = []
+    if "strategic" in phases:  # whichever optimiser searched them (a preset's optimiser may have changed since)
+        found += [name for optimiser in OPTIMISERS for name in experiments.strategic_campaign_names(optimiser, ctx.metric, ctx.seed)]
     if "compare" in phases:
         found += [n for group in compare_names(ctx).values() for n in group]
     if "atlas" in phases:

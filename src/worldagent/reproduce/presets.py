@@ -74,6 +74,8 @@ class EnvBudgets:
             paper preset: the paper's observation, ``observation="rays"``).
         algo: this env's training algorithm at this preset ("": ``spec.default_algorithm``;
             ``reproduce --algo`` overrides both).
+        optimiser: the strategic phase's search optimiser ("": ``spec.optimiser``; a paper preset
+            whose env departs from CMA-ES names ``"cmaes"``, the paper's).
         settings: ``{algo: {config field: value}}`` of this env's agents at this preset (ours), over the
             algorithm's defaults and the env's overrides; ``reproduce --set`` wins over them.
         influence_selection: the property of the influenced training worlds ("": the paper's,
@@ -108,6 +110,7 @@ class EnvBudgets:
     failure_worlds: int = 0
     options: Mapping[str, Any] = field(default_factory=dict)
     algo: str = ""
+    optimiser: str = ""
     settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 
@@ -309,7 +312,7 @@ class Preset:
                 **({"curriculum": self.curriculum_of(env)} if self.curriculum_of(env) else {}),  # absent for dr, likewise
             },
             "random": {"worlds": b.random_worlds, "repeats": self.repeats},
-            "strategic": {"budget": b.strategic_budget, "repeats": self.repeats, "optimiser": "cmaes"},
+            "strategic": {"budget": b.strategic_budget, "repeats": self.repeats, "optimiser": self.optimiser_of(env)},
             "compare": {
                 "budget": b.compare_budget,
                 "bo_budget": b.bo_budget or b.compare_budget,
@@ -363,6 +366,10 @@ class Preset:
         """The training algorithm of ``env``'s agents: ``algo`` where the env has it, else the budgets', else the env's default."""
         spec = registry.get(env)
         return self.algo if self.algo in spec.algorithms else (self.budgets(env).algo or spec.default_algorithm)
+
+    def optimiser_of(self, env: str) -> str:
+        """The search optimiser of ``env``'s strategic phase: the budgets' where they name one, else the env's."""
+        return self.budgets(env).optimiser or registry.get(env).optimiser
 
     def options_of(self, env: str) -> dict[str, Any]:
         """The env options of ``env``'s agents: ``spec.reproduce_options`` with the budgets' on top."""

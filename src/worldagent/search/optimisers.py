@@ -50,6 +50,10 @@ import numpy as np
 from worldagent.errors import WorldagentError
 
 OPTIMISERS = ("cmaes", "bo", "random")
+# Worlds a search evaluates by default (``strategic``, ``search``). BO's Gaussian process is refitted every round on all the
+# worlds seen so far, so its cost grows with their cube: at 2,000 worlds a search would take hours. 210 is the budget at which
+# BO's worlds were compared with CMA-ES's on fresh episodes (benchmarks/results/noisy-search.json).
+DEFAULT_BUDGETS = {"cmaes": 2_000, "bo": 210, "random": 2_000}
 NOISE_AWARE = ("cmaes-re", "bo-noise")  # searches that re-evaluate (see the module docstring)
 CMAES_REEVALUATIONS = 3  # incumbents re-asked per CMA-ES generation (of the 21: 18 samples + 3)
 BO_REEVALUATIONS = 1  # incumbents re-asked per BO round (4 suggestions + 1)

@@ -7,7 +7,7 @@ Runs the README's main job in a fresh run directory (``--out`` is removed first)
 the CPU seconds of its processes (user + sys: load-independent where wall is not), the load average
 before it started, and each phase's own wall seconds and one-line result from the run's ``manifest.json``, with the machine,
 in ``benchmarks/results/main-job-time-<backend>.json``, beside the run it replaces there (``previous``: its
-commit, time and seconds, and the ratios). ``--env racing,harvest`` is what a fresh install runs (``all`` also
+commit, time and seconds, and the ratios) and every run recorded before that one (``history``, oldest first). ``--env racing,harvest`` is what a fresh install runs (``all`` also
 takes installed example envs such as ``ued_maze``).
 """
 
@@ -72,10 +72,21 @@ def main() -> None:
         **({"note": args.note} if args.note else {}),
     }
     if previous is not None:
-        result["previous"] = {key: previous.get(key) for key in ("when", "commit", "wall_s", "cpu_s", "note")}
+        result["previous"] = summary(previous)
         result["ratio_to_previous"] = {key: round(result[key] / previous[key], 3) for key in ("wall_s", "cpu_s")}
+        result["history"] = earlier_runs(previous)
     print(record("main-job-time", result))
     print(f"{wall:.0f} s wall ({wall / 60:.1f} min), {cpu:.0f} s CPU, exit {done.returncode}; target {TARGET_WALL_S} s")
+
+
+def summary(run: dict) -> dict:
+    """What a later record keeps of a run: when, which commit, its seconds and its note."""
+    return {key: run.get(key) for key in ("when", "commit", "wall_s", "cpu_s", "note")}
+
+
+def earlier_runs(previous: dict) -> list[dict]:
+    """The runs recorded before ``previous``, oldest first: its own ``history`` and its ``previous``."""
+    return [*previous.get("history", []), *([previous["previous"]] if previous.get("previous") else [])]
 
 
 def commit() -> str:

@@ -106,6 +106,9 @@ def test_each_setting_unlike_the_papers_is_named_and_the_gap_is_not_called_real(
     assert likely_cause(minimum, results) == "settings unlike the paper preset: 420 worlds searched (paper preset: 2,100)"  # that field only
     box = departures_section([CRASHED], results, "quick")
     assert "1 of its settings differs" in box and "data-setting='racing/strategic/budget'" in box
+    # an env whose searches default to BO (harvest) departs from the paper's CMA-ES in its strategic phase
+    results = racing_as_paper(strategic={"optimiser": "bo"})
+    assert likely_cause(minimum, results) == "settings unlike the paper preset: search optimiser bo (paper preset: cmaes)"
 
 
 def test_an_omitted_setting_is_its_default_and_repeats_and_repair_count():

@@ -40,6 +40,7 @@ WORDS = {
     ("agent", "learning_starts"): ("transitions before learning starts", False),
     ("random", "worlds"): ("random worlds", True),
     ("strategic", "budget"): ("worlds searched", True),
+    ("strategic", "optimiser"): ("search optimiser", False),
     ("compare", "budget"): ("worlds per optimiser and seed", True),
     ("compare", "bo_budget"): ("worlds per Bayesian-optimisation seed", True),
     ("compare", "seeds"): ("seeds per optimiser", True),

@@ -180,8 +180,18 @@ def check_optimiser(name: str) -> None:
         raise WorldagentError(f"unknown optimiser {name!r}; use one of: {', '.join(OPTIMISERS)}.")
 
 
-OPTIMISER_HELP = "cmaes (the paper's), bo or random; default: the env's (worldagent envs; harvest: bo, racing: cmaes)."
-BUDGET_HELP = "Worlds to evaluate (CMA-ES rounds up to whole generations); default 2,000, or 210 with bo (its cost grows with the worlds seen)."
+def optimiser_help() -> str:
+    """``--optimiser``: the choices and each registered env's default (``EnvSpec.optimiser``)."""
+    defaults = ", ".join(f"{name}: {registry.get(name).optimiser}" for name in registry.names())
+    return f"cmaes (the paper's), bo or random; default: the env's ({defaults})."
+
+
+def budget_help() -> str:
+    """``--budget``: its default per optimiser (``search.optimisers.DEFAULT_BUDGETS``)."""
+    from worldagent.search.optimisers import DEFAULT_BUDGETS
+
+    defaults = ", ".join(f"{budget:,} with {name}" for name, budget in DEFAULT_BUDGETS.items())
+    return f"Worlds to evaluate (CMA-ES rounds up to whole generations); default {defaults} (BO's cost grows with the worlds seen)."
 
 
 def search_settings(env: str, optimiser: str | None, budget: int | None) -> tuple[str, int]:

@@ -25,9 +25,9 @@ from worldagent.errors import WorldagentError
 from worldagent.files import write_text
 from worldagent.reproduce.layout import RunLayout
 from worldagent.reproduce.presets import Preset
+from worldagent.search.optimisers import OPTIMISERS
 
 QUALITY_SAMPLES = 1000  # draws z ~ N(0, I) for the generator's coverage / validity figures
-OPTIMISERS = ("cmaes", "bo", "random")
 
 
 @dataclass

@@ -39,8 +39,9 @@ from queue import Empty
 from worldagent.envs import registry
 from worldagent.errors import WorldagentError
 from worldagent.reproduce.manifest import Manifest, can_share, phase_key
-from worldagent.reproduce.phases import CURRICULUM_DEPENDS, DEPENDS, OPTIMISERS, PHASE_FUNCTIONS, EnvContext, compare_names, dependents
+from worldagent.reproduce.phases import CURRICULUM_DEPENDS, DEPENDS, PHASE_FUNCTIONS, EnvContext, compare_names, dependents
 from worldagent.reproduce.presets import PHASES, Preset, paper_phase_config
+from worldagent.search.optimisers import OPTIMISERS
 
 TOLERATED = ("influence",)  # phases whose failure is a result, not the end of the run
 SEQUENTIAL_VARIABLE = "WORLDAGENT_SEQUENTIAL_ENVS"  # set (to anything but "" or "0"): one env after another

@@ -43,9 +43,10 @@ def train_generator(
 ):
     """Train the VAE (resuming a checkpoint in ``out``), save G(z) with the repair called
     ``repair_name`` (None: the env's default); returns (the trained VAE, the repair's settings,
-    defaults included). The repair is made first: a bad name or settings cost no training."""
+    defaults included, the names of those it fitted to the decoder: ``fit_repair``). The repair is
+    made first: a bad name or settings cost no training."""
     from worldagent.worlds.dataset import WorldDataset, make_dataset
-    from worldagent.worlds.generator import build_generator, make_repair, save_generator
+    from worldagent.worlds.generator import build_generator, fit_repair, make_repair, save_generator
     from worldagent.worlds.vae import train_vae
 
     if dataset_path is None:
@@ -55,8 +56,10 @@ def train_generator(
     data = WorldDataset.load(dataset_path, env=env)
     repaired = make_repair(data, repair, repair_name)
     vae = train_vae(data, config, progress=progress, checkpoint_dir=out)
-    save_generator(out, vae, dataset_path, build_generator(vae, data, repair=repaired, repair_name=repair_name))
-    return vae, dict(repaired.config)
+    generator = fit_repair(build_generator(vae, data, repair=repaired, repair_name=repair_name))
+    save_generator(out, vae, dataset_path, generator)
+    used = dict(generator.repair.config)
+    return vae, used, {name for name, value in used.items() if repaired.config.get(name) != value}
 
 
 def trained_epochs(directory: Path) -> int:
@@ -202,10 +205,10 @@ def register(app: typer.Typer) -> None:
         check_seed(seed)
         check_writable(out, folder=True)
         epochs_before = trained_epochs(out)
-        vae, used = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet, repair_name=repair_name)
+        vae, used, fitted = train_generator(env, out, dataset_path, n, seed, config, settings, progress=not quiet, repair_name=repair_name)
         last = vae.kept
         repair_note = (repair_name or registry.get(env).default_repair) + "".join(
-            f", {name}={value}" + ("" if name in settings else " (default)") for name, value in used.items()
+            f", {name}={value}" + ("" if name in settings else " (fitted)" if name in fitted else " (default)") for name, value in used.items()
         )
         if epochs_before >= len(vae.history):  # a finished VAE is reused as it is (a new repair costs no training)
             console.print(f"reused the VAE already trained in {out} ({epochs_before} epochs); only the repair was rebuilt (another --out retrains)")

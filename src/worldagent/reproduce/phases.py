@@ -147,7 +147,7 @@ def generator_phase(ctx: EnvContext) -> dict:
     import jax
 
     from worldagent.worlds.dataset import WorldDataset
-    from worldagent.worlds.generator import build_generator, save_generator
+    from worldagent.worlds.generator import build_generator, fit_repair, save_generator
     from worldagent.worlds.pictures import traversal_sheet
     from worldagent.worlds.quality import assess, gate_kinds
     from worldagent.worlds.vae import train_vae
@@ -156,7 +156,7 @@ def generator_phase(ctx: EnvContext) -> dict:
     data = WorldDataset.load(layout.dataset_path, env=ctx.env)
     config = vae_config(ctx.preset, ctx.env)
     vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=layout.generator_dir)
-    generator = build_generator(vae, data, repair_name=ctx.preset.repair)
+    generator = fit_repair(build_generator(vae, data, repair_name=ctx.preset.repair))
     save_generator(layout.generator_dir, vae, layout.dataset_path, generator)
     quality = assess(generator, vae, data, QUALITY_SAMPLES, jax.random.key(ctx.seed), ctx.preset.accept_generator)
     warnings, verdict, kept_epoch = quality["warnings"], quality["gate"], quality["training"]["kept_epoch"]

@@ -9,7 +9,18 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from worldagent.envs.harvest.apples import CLUSTERS, Clusters, choose_clusters, cluster_apples, cluster_radii, disc_offsets, rooms_from_walls
+from worldagent.envs.harvest.apples import (
+    CLUSTERS,
+    SPREAD,
+    Clusters,
+    choose_clusters,
+    cluster_apples,
+    cluster_radii,
+    disc_offsets,
+    fit_shift,
+    placed_apples,
+    rooms_from_walls,
+)
 from worldagent.envs.harvest.maps import generate_layout
 from worldagent.envs.harvest.open_repair import OpenRooms
 from worldagent.envs.harvest.repair import HarvestRepair, median_apples
@@ -22,6 +33,7 @@ CENTRES = ((4, 4), (4, 14), (14, 9))  # far apart: three separate clusters
 BATCH = 16  # every compiled call below takes this batch: one compile each
 cluster_apples_jit = jax.jit(jax.vmap(cluster_apples))
 choose_jit = jax.jit(jax.vmap(choose_clusters))
+choose_apart_jit = jax.jit(jax.vmap(lambda rooms, logit: choose_clusters(rooms, logit, apart=True)))
 rooms_jit = jax.jit(jax.vmap(rooms_from_walls))
 
 
@@ -56,6 +68,28 @@ def test_logits_peaking_at_three_discs_give_three_clusters_there():
         assert sorted(divmod(int(c), SIZE) for c in found[found >= 0]) == sorted(CENTRES)
     # radius 2 peaks: three discs of 13 cells hold the generator's 90 %, all on the discs
     assert apples[1].sum() == round(0.9 * 3 * 13) and apples[1][peaked_logits(CENTRES, 2) < 0].sum() == 0
+
+
+def test_spread_keeps_later_clusters_off_a_smeared_blob_but_finds_separate_peaks():
+    blob = peaked_logits([(9, 9)], 3, high=2.0)  # one decoder smear, wider than any disc: logits 2 on a radius-3 disc
+    peaks = peaked_logits(CENTRES, 1)
+    logits = jnp.asarray(np.stack([blob, peaks] * (BATCH // 2)))
+    touching, apart = choose_jit(open_rooms(BATCH), logits), choose_apart_jit(open_rooms(BATCH), logits)
+    assert (np.asarray(touching.centre[0]) >= 0).sum() > 1  # "clusters" spends more on the smear's rim
+    assert (np.asarray(apart.centre[0]) >= 0).sum() == 1  # "spread": one cluster, nothing may touch it
+    found = np.asarray(apart.centre[1])
+    assert sorted(divmod(int(c), SIZE) for c in found[found >= 0]) == sorted(CENTRES)  # separate peaks are still found
+
+
+def test_fit_shift_matches_the_target_mean_and_grows_with_it():
+    rooms, _ = generator_rooms()
+    logits = jax.random.normal(jax.random.key(3), (BATCH, SIZE, SIZE)) * 2.0 - 3.0  # unsure everywhere, as a blurry decoder
+    count = jax.jit(lambda shift: jax.vmap(lambda r, a: placed_apples(r, a, SPREAD, shift).sum())(rooms, logits).mean())
+    unshifted = float(count(0.0))
+    shifts = [fit_shift(rooms, logits, target) for target in (unshifted + 6.0, unshifted + 12.0)]
+    assert 0.0 < shifts[0] < shifts[1]
+    for shift, target in zip(shifts, (unshifted + 6.0, unshifted + 12.0)):
+        assert abs(float(count(shift)) - target) <= 1.5  # the count moves in steps of whole clusters
 
 
 def test_radii_split_half_and_half_by_how_much_each_rim_gains():
@@ -106,11 +140,13 @@ def test_repairs_with_clusters_give_valid_maps_deterministic_and_batch_invariant
 
 
 def test_apples_setting_of_both_repairs(harvest_data):
-    assert OpenRooms.from_dataset(harvest_data).config["apples"] == CLUSTERS  # the open repair's default
+    assert OpenRooms.from_dataset(harvest_data).config["apples"] == SPREAD  # the open repair's default
     assert HarvestRepair.from_dataset(harvest_data).config["apples"] == median_apples(harvest_data.worlds)  # the paper's: K
-    saved = {"apples": 12, "rounds": 1, "entrances": "posterior"}  # what generators saved before clusters record
-    assert OpenRooms.from_dataset(harvest_data, saved).config == saved  # decodes as it did: top-K apples, the posterior entrance rule
+    for saved in ({"apples": 12, "rounds": 1, "entrances": "posterior"}, {"apples": CLUSTERS, "rounds": 1, "entrances": "tempered"}):
+        assert OpenRooms.from_dataset(harvest_data, saved).config == saved  # generators saved with top-K or clusters decode as they did
     assert HarvestRepair.from_dataset(harvest_data, {"apples": CLUSTERS}).config == {"apples": CLUSTERS, "walls": "nearest"}
+    spread = HarvestRepair.from_dataset(harvest_data, {"apples": SPREAD, "apple_shift": 1.25})
+    assert spread.config == {"apples": SPREAD, "apple_shift": 1.25, "walls": "nearest"}
     for bad in ("many", 2.5):
         with pytest.raises(WorldagentError, match="apples="):
             OpenRooms.from_dataset(harvest_data, {"apples": bad})

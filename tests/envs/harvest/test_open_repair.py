@@ -201,7 +201,7 @@ def test_jit_and_vmap_agree_with_one_call(random_repaired):
 
 def test_from_dataset_settings_and_config(harvest_data):
     default = OpenRooms.from_dataset(harvest_data)
-    assert default.config == {"apples": "clusters", "rounds": 1, "entrances": "tempered"}  # as the generator places them
+    assert default.config == {"apples": "spread", "apple_shift": None, "rounds": 1, "entrances": "tempered"}  # shift: fitted with its generator
     assert OpenRooms.from_dataset(harvest_data, {"apples": median_apples(harvest_data.worlds)}).apples == median_apples(harvest_data.worlds)
     chosen = OpenRooms.from_dataset(harvest_data, {"apples": 12, "rounds": 2, "entrances": "likelihood"})
     assert OpenRooms.from_dataset(harvest_data, json.loads(json.dumps(chosen.config))) == chosen
@@ -220,6 +220,8 @@ def test_from_dataset_settings_and_config(harvest_data):
         ({"rounds": "two"}, "rounds"),
         ({"rounds": True}, "rounds"),
         ({"entrances": "never"}, "entrances"),
+        ({"apple_shift": "high"}, "apple_shift"),
+        ({"apple_shift": float("nan")}, "apple_shift"),
     ],
 )
 def test_bad_settings_are_one_line_errors(harvest_data, config, match):

@@ -25,6 +25,26 @@ log-probability under the decoder by ``log(0.9·e^l + 0.1)`` (``cell_gain``):
    cannot know where they are, so they go where it is least sure; spawn corners are cleared, as
    the generator clears them.
 
+``apples="spread"`` (the open repair's default; the nearest repair takes it too when asked)
+changes two things, both because a VAE's apple logits are blurrier than the generator's clusters:
+
+- step 2 takes only clusters that keep a free cell between them and the clusters found (no
+  overlap, no touching): the decoder smears a cluster over more cells than its disc, and with
+  touching allowed the greedy step spent its clusters on that smear's rim. Fresh maps' clusters
+  merge into fewer patches by chance; a decoder cannot know where, so the rule keeps them apart;
+- the apple logits are shifted by one constant per generator (``apple_shift``), fitted once when
+  the generator is made (``fit_shift``: decodes of the prior get the dataset's mean apple count).
+  The most probable placement under logits that are unsure everywhere is too few clusters: on
+  the quick preset's 20-epoch VAE the ``clusters`` rule left 10.8 apples a map against fresh
+  maps' 28.3, in 1.6 patches against 3.6, and a spawn walked 14.7 cells to its nearest apple
+  against 9.8. Spread (shift 1.61): 28.7 apples, 3.1 patches, 9.6 cells; the patches stay 13 %
+  short because that VAE's walls hold 1.5 rooms a map against fresh maps' 2.3, and a room takes
+  at most 3 clusters. On the fidelity benchmark's 100-epoch VAE (shift 0.68) count, patches,
+  patch size and that walk are within 7 % of fresh maps' (``clusters``: -8 %, -17 %, +10 %,
+  +10 %; ``benchmarks/harvest_repair_fidelity.py``, docs/open-worlds.md).
+
+``clusters`` stays what generators saved with it record, so they decode as they did.
+
 Deterministic, a pure function of one map's logits and rooms (no batch-mates, no random key), and
 jittable: a fixed number of greedy steps (rooms × the most clusters), each a few shifted sums over
 the grid; under a millisecond a map on a CPU core. Measured against fresh maps in
@@ -48,6 +68,10 @@ from worldagent.envs.harvest.maps import NUM_ROOMS, MapConfig
 from worldagent.envs.harvest.world import spawn_corners
 
 CLUSTERS = "clusters"  # the ``apples`` setting that selects this rule (an integer K selects top-K)
+SPREAD = "spread"  # clusters kept apart, logits shifted by the generator's fitted ``apple_shift`` (module doc)
+CLUSTER_RULES = (CLUSTERS, SPREAD)
+SHIFT_RANGE = (-8.0, 8.0)  # where ``fit_shift`` looks: past +-8 a logit of the clip range decides alone
+SHIFT_STEPS = 20  # bisection steps: the range / 2**20, far below what changes a map
 
 
 def disc_offsets(radius: int) -> list[tuple[int, int]]:
@@ -87,13 +111,14 @@ class Clusters(NamedTuple):
     ring: jax.Array  # f32[N] what growing it from the smallest radius to the largest adds to the log-probability
 
 
-def choose_clusters(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig = MapConfig()) -> Clusters:
+def choose_clusters(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig = MapConfig(), apart: bool = False) -> Clusters:
     """The clusters the apple logits find most probable, room by room (steps 1 and 2 of the module doc).
 
     Args:
         rooms: bool[R, H, W] the rooms (disjoint; an empty one gets no cluster).
         apple_logit: f32[H, W] decoded apple logits.
         config: the generator's settings (``clusters_per_room``, ``cluster_radius``, ``apple_density``).
+        apart: step 2 takes only clusters that neither overlap nor touch those found (``apples="spread"``).
     """
     num_rooms, height, width = rooms.shape
     least, most = config.clusters_per_room
@@ -109,6 +134,10 @@ def choose_clusters(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig 
         gain = jnp.stack([disc_sums(gained, radius) for radius in radii], axis=1)  # [R, K, H, W], clipped to the room
         must = present & (count < least)
         allowed = jnp.where(must.any(), must, present & (count < most))
+        if apart:  # a disc that reaches a found cluster's cells or their 8 neighbours is out (a room's first is never)
+            near = jnp.where(rooms & grown(covered)[None], 1.0, 0.0)
+            touching = jnp.stack([disc_sums(near, radius) for radius in radii], axis=1) > 0
+            gain = jnp.where(touching & ~must.any(), -jnp.inf, gain)
         gain = jnp.where(allowed[:, None, None, None] & rooms[:, None], gain, -jnp.inf).reshape(-1)
         best = jnp.argmax(gain)
         room, kind, centre = jnp.unravel_index(best, (num_rooms, len(radii), height * width))
@@ -127,6 +156,13 @@ def choose_clusters(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig 
     return jax.lax.scan(step, start, jnp.arange(slots))[0][2]
 
 
+def grown(mask: jax.Array) -> jax.Array:
+    """bool[H, W]: ``mask`` and its cells' 8 neighbours."""
+    padded = jnp.pad(mask, 1)
+    height, width = mask.shape
+    return functools.reduce(jnp.logical_or, [padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] for dr in (-1, 0, 1) for dc in (-1, 0, 1)])
+
+
 def cluster_radii(clusters: Clusters, config: MapConfig = MapConfig()) -> jax.Array:
     """int32[N]: each cluster's radius (step 3 of the module doc): the larger radius for every cluster whose rim
     gains, and for the half of the clusters whose rims gain most.
@@ -141,10 +177,10 @@ def cluster_radii(clusters: Clusters, config: MapConfig = MapConfig()) -> jax.Ar
     return jnp.where(large & used, high, low).astype(jnp.int32)
 
 
-def cluster_discs(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig = MapConfig()) -> jax.Array:
+def cluster_discs(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig = MapConfig(), apart: bool = False) -> jax.Array:
     """bool[H, W]: the union of the clusters ``choose_clusters`` finds, grown to ``cluster_radii``, each clipped to its room."""
     height, width = apple_logit.shape
-    clusters = choose_clusters(rooms, apple_logit, config)
+    clusters = choose_clusters(rooms, apple_logit, config, apart)
     radius = cluster_radii(clusters, config)
     discs = jax.vmap(lambda centre, r: disc_of(jnp.maximum(centre, 0), r, height, width))(clusters.centre, radius)
     return (discs & rooms[clusters.room] & (clusters.centre >= 0)[:, None, None]).any(axis=0)
@@ -163,15 +199,44 @@ def fill_clusters(discs: jax.Array, apple_logit: jax.Array, density: float = Map
     return apples & ~corners
 
 
-def cluster_apples(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig = MapConfig()) -> jax.Array:
+def cluster_apples(rooms: jax.Array, apple_logit: jax.Array, config: MapConfig = MapConfig(), apart: bool = False) -> jax.Array:
     """bool[H, W]: apples placed by the generator's cluster rule, its draws read off ``apple_logit`` f32[H, W].
 
     Args:
         rooms: bool[R, H, W] the map's rooms (apples never leave them: walls and entrances stay free of apples).
         apple_logit: f32[H, W] decoded apple logits.
         config: the generator's settings.
+        apart: clusters beyond each room's first neither overlap nor touch (``choose_clusters``).
     """
-    return fill_clusters(cluster_discs(rooms, apple_logit, config), apple_logit, config.apple_density)
+    return fill_clusters(cluster_discs(rooms, apple_logit, config, apart), apple_logit, config.apple_density)
+
+
+def placed_apples(rooms: jax.Array, apple_logit: jax.Array, rule: str, shift: float | None = None) -> jax.Array:
+    """bool[H, W]: apples by ``rule`` ("clusters" or "spread", ``CLUSTER_RULES``); "spread" shifts the logits by ``shift`` (None: 0, unfitted)."""
+    if rule == SPREAD:
+        return cluster_apples(rooms, apple_logit + (0.0 if shift is None else shift), apart=True)
+    return cluster_apples(rooms, apple_logit)
+
+
+@jax.jit
+def _mean_spread_count(shift: float, rooms: jax.Array, apple_logit: jax.Array) -> jax.Array:
+    """The mean apple count of ``placed_apples(..., "spread", shift)`` over a batch (arguments, not constants: no folding)."""
+    return jax.vmap(lambda r, a: placed_apples(r, a, SPREAD, shift).sum())(rooms, apple_logit).mean()
+
+
+def fit_shift(rooms: jax.Array, apple_logit: jax.Array, target: float) -> float:
+    """The logit shift with which ``apples="spread"`` gives maps ``target`` apples on average (bisection).
+
+    Args:
+        rooms: bool[B, R, H, W] the rooms of B decodes of the prior, as the repair finds them.
+        apple_logit: f32[B, H, W] their apple logits (clipped as the repair clips them).
+        target: the mean apple count wanted (the dataset's).
+    """
+    low, high = SHIFT_RANGE
+    for _ in range(SHIFT_STEPS):  # more shift, more clusters gain: the count grows with it (up to greedy ties)
+        middle = (low + high) / 2
+        low, high = (middle, high) if float(_mean_spread_count(middle, rooms, apple_logit)) < target else (low, middle)
+    return round((low + high) / 2, 4)
 
 
 def _shift(mask: jax.Array, dr: int, dc: int, fill: bool) -> jax.Array:

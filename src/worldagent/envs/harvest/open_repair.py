@@ -51,15 +51,18 @@ starts (no rooms and the largest rooms, each side first) and keeps the final lay
 highest exact score (entrances carved). Given as confident logits, 998 of 1,000 generated maps
 come back with their own walls; on a trained generator's decodes the layout found scores at least
 the nearest dataset layout's likelihood on 98% (with ``entrances="likelihood"``,
-``benchmarks/harvest_open_repair.py``). With the defaults (tempered entrances, clustered apples),
-61.6% of the quick run's decoded layouts are in no dataset map, against 68.6% of fresh procedural
-maps; a map takes about 55 ms on a shared CPU core there (``benchmarks/harvest_repair_fidelity.py``).
+``benchmarks/harvest_open_repair.py``). With the defaults (tempered entrances, spread apples),
+61.6% of a 100-epoch VAE's decoded layouts are in no dataset map, against 68.6% of fresh procedural
+maps; a map takes 20-55 ms on a shared CPU core (``benchmarks/harvest_repair_fidelity.py``).
 
-Apples (``apples="clusters"``, the default since issue 48): as the generator places them, 1-3 round
-clusters in each of the layout's rooms (its merged regions' interiors and the space outside), read
-off the apple logits (``apples.cluster_apples``). ``apples=K`` (what generators saved before then
-record, so they decode as they did): as ``HarvestRepair``'s top-K rule (``repair.place_apples``),
-exactly K on the free cells with the highest apple logits. Spawn corners are free either way.
+Apples (``apples="spread"``, the default): as the generator places them, 1-3 round clusters in each
+of the layout's rooms (its merged regions' interiors and the space outside), read off the apple
+logits shifted by ``apple_shift``, which the repair fits once when its generator is made
+(``fitted``; ``apples.placed_apples`` and ``apples.fit_shift``). ``apples="clusters"`` (what
+generators saved from issue 48 until "spread" record): the same without the shift and the
+spacing. ``apples=K`` (what generators saved before then record, so they decode as they did): as
+``HarvestRepair``'s top-K rule (``repair.place_apples``), exactly K on the free cells with the
+highest apple logits. Spawn corners are free either way.
 """
 
 from __future__ import annotations
@@ -71,13 +74,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from worldagent.envs.harvest.apples import CLUSTERS, cluster_apples
+from worldagent.envs.harvest.apples import SPREAD, fit_shift, placed_apples
 from worldagent.envs.harvest.maps import NUM_CORNERS, MapConfig, corner_bounds, entrance_candidates, region_walls
-from worldagent.envs.harvest.repair import LOGIT_CLIP, apple_setting, corner_mask, place_apples
+from worldagent.envs.harvest.repair import LOGIT_CLIP, apple_setting, corner_mask, mean_apples, place_apples, shift_setting
 from worldagent.envs.harvest.world import HarvestMap
 from worldagent.errors import WorldagentError
 
-SETTINGS = ("apples", "rounds", "entrances")
+SETTINGS = ("apples", "apple_shift", "rounds", "entrances")
 ENTRANCE_RULES = ("tempered", "posterior", "likelihood")  # the first is the default
 TEMPER = 1.5  # the exponent T of the tempered rule (module doc)
 DEFAULT_ROUNDS = 1  # a second round recovered 2 more of 1,000 generated maps at twice the cost
@@ -278,17 +281,27 @@ def choose_rooms(wall_logit: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str 
     return finals[jnp.argmax(layout_scores(wall_logit, finals, rule))]
 
 
-def open_map(logits: jax.Array, apples: int | str, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> HarvestMap:
-    """One valid map from logits f32[2, S, S]: the generator layout the wall logits find most probable, its
-    apples in clusters (``apples="clusters"``) or on the K free cells with the highest logits (``apples=K``)."""
-    wall_logit, apple_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP), jnp.clip(logits[1], -LOGIT_CLIP, LOGIT_CLIP)
+def open_layout(logits: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> tuple[jax.Array, jax.Array]:
+    """(walls bool[S, S], rooms bool[R, S, S]) from logits f32[2, S, S]: the generator layout the wall logits find
+    most probable, entrances carved, and its rooms as the generator's apple step sees them (``maps.generate_map``)."""
+    wall_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP)
     size = wall_logit.shape[0]
     group_masks, closed = region_walls(*rooms_of(choose_rooms(wall_logit, rounds, rule), size), size)
     walls = closed & ~carve_best_entrances(wall_logit, closed, group_masks, rule)
-    if apples != CLUSTERS:
+    return walls, jnp.concatenate([group_masks & ~closed[None], ~group_masks.any(axis=0)[None]])
+
+
+def open_map(
+    logits: jax.Array, apples: int | str, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0], shift: float | None = None
+) -> HarvestMap:
+    """One valid map from logits f32[2, S, S]: ``open_layout``'s walls, its apples in clusters (``apples`` "spread"
+    shifted by ``shift``, or "clusters") or on the K free cells with the highest logits (``apples=K``)."""
+    wall_logit, apple_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP), jnp.clip(logits[1], -LOGIT_CLIP, LOGIT_CLIP)
+    walls, rooms = open_layout(logits, rounds, rule)
+    if isinstance(apples, int):
         return place_apples(walls, wall_logit, apple_logit, apples)
-    rooms = jnp.concatenate([group_masks & ~closed[None], ~group_masks.any(axis=0)[None]])  # the generator's rooms (maps.generate_map)
-    return HarvestMap(walls=walls & ~jnp.asarray(corner_mask(size, size)), apples=cluster_apples(rooms, apple_logit))
+    size = wall_logit.shape[0]
+    return HarvestMap(walls=walls & ~jnp.asarray(corner_mask(size, size)), apples=placed_apples(rooms, apple_logit, apples, shift))
 
 
 def _count(name: str, value, low: int, high: int, hint: str) -> int:
@@ -302,49 +315,66 @@ class OpenRooms:
     """New valid walls: the generator layout the decoder finds most probable (closed rooms kept), apples in clusters.
 
     Attributes:
-        apples: ``"clusters"`` (as the generator places them) or K, the apple count of every map (static).
+        apples: ``"spread"`` or ``"clusters"`` (as the generator places them) or K, the apple count of every map (static).
         rounds: block-coordinate passes over the four sides from each start (static).
         entrances: "tempered" (default), "posterior" or "likelihood", the entrance rule (``carve_best_entrances``, static).
         grid: (S, S) of the maps (static).
+        apple_shift: the apple logits' shift of ``"spread"`` (``fitted``; None: not fitted, no shift) (static).
+        apple_target: the dataset's mean apple count, what ``fitted`` matches (static).
     """
 
     apples: int | str = struct.field(pytree_node=False)
     rounds: int = struct.field(pytree_node=False)
     entrances: str = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
+    apple_shift: float | None = struct.field(pytree_node=False, default=None)
+    apple_target: float = struct.field(pytree_node=False, default=0.0)
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> OpenRooms:
         """The repair for maps like ``dataset``'s (a harvest ``WorldDataset``).
 
-        ``config``: ``apples`` "clusters" (default: as the generator places them) or K (exactly K on the
-        cells with the highest apple logits); ``rounds`` (default 1); ``entrances`` "tempered" (default),
+        ``config``: ``apples`` "spread" (default: as the generator places them, kept apart), "clusters"
+        or K (exactly K on the cells with the highest apple logits); ``apple_shift`` (default: fitted
+        when the generator is made); ``rounds`` (default 1); ``entrances`` "tempered" (default),
         "posterior" (what generators saved before then record) or "likelihood".
         """
         config = dict(config or {})
         unknown = set(config) - set(SETTINGS)
         if unknown:
             raise WorldagentError(
-                f"unknown setting(s) {sorted(unknown)} of harvest's open repair; use apples=clusters|K, rounds=N and entrances=tempered|posterior|likelihood."
+                f"unknown setting(s) {sorted(unknown)} of harvest's open repair; "
+                "use apples=spread|clusters|K, apple_shift=X, rounds=N and entrances=tempered|posterior|likelihood."
             )
         grid = tuple(int(s) for s in dataset.cell_shape[1:])
         if grid[0] != grid[1] or grid[0] < 10:  # the generator's rooms are 5 to side - 5 cells
             raise WorldagentError(f"harvest's open repair needs square maps of side 10 or more, as the generator makes; got {grid}.")
         try:
-            apples = apple_setting(CLUSTERS if config.get("apples") is None else config["apples"], grid, dataset.worlds)
+            apples = apple_setting(SPREAD if config.get("apples") is None else config["apples"], grid, dataset.worlds)
         except ValueError as error:
             raise WorldagentError(f"apples={config['apples']!r}: {error}.") from None
         rounds = _count("rounds", config.get("rounds", DEFAULT_ROUNDS), 1, MAX_ROUNDS, f"default {DEFAULT_ROUNDS}")
         entrances = config.get("entrances", ENTRANCE_RULES[0])
         if entrances not in ENTRANCE_RULES:
             raise WorldagentError(f"entrances={entrances!r}; pick one of {', '.join(ENTRANCE_RULES)}.")
-        return cls(apples, rounds, entrances, grid)
+        return cls(apples, rounds, entrances, grid, shift_setting(config.get("apple_shift")), mean_apples(dataset.worlds))
 
     @property
     def config(self) -> dict:
         """The settings that rebuild this repair (``from_dataset(dataset, config)``)."""
-        return {"apples": self.apples, "rounds": self.rounds, "entrances": self.entrances}
+        shift = {"apple_shift": self.apple_shift} if self.apples == SPREAD else {}
+        return {"apples": self.apples, **shift, "rounds": self.rounds, "entrances": self.entrances}
+
+    def fitted(self, logits: jax.Array) -> OpenRooms:
+        """This repair with ``apple_shift`` fitted on decoded logits f32[B, 2·S·S] of the prior (``apples.fit_shift``);
+        itself unless its apples are "spread" and no shift is set."""
+        if self.apples != SPREAD or self.apple_shift is not None:
+            return self
+        grids = logits.reshape(-1, 2, *self.grid)
+        rooms = jax.jit(jax.vmap(lambda one: open_layout(one, self.rounds, self.entrances)[1]))(grids)
+        return self.replace(apple_shift=fit_shift(rooms, jnp.clip(grids[:, 1], -LOGIT_CLIP, LOGIT_CLIP), self.apple_target))
 
     def __call__(self, logits: jax.Array) -> HarvestMap:
         """Valid maps from decoded logits f32[B, 2·S·S] (walls, then apples): ``HarvestMap`` of bool[B, S, S]."""
-        return jax.vmap(lambda one: open_map(one, self.apples, self.rounds, self.entrances))(logits.reshape(-1, 2, *self.grid))
+        grids = logits.reshape(-1, 2, *self.grid)
+        return jax.vmap(lambda one: open_map(one, self.apples, self.rounds, self.entrances, self.apple_shift))(grids)

@@ -13,9 +13,10 @@ dataset layouts only; ``open_repair.OpenRooms`` returns new layouts the generato
 Apples. By default exactly K apples on the K free cells with the highest apple logits (the paper
 keeps the number of resources the same across worlds); the spawn corners are always free. If fewer
 than K non-corner cells are free, the walls with the lowest logits are cleared to make room, so any
-input yields a valid map. ``apples="clusters"`` places them as the procedural generator does instead
-(``apples.cluster_apples``: 1-3 round clusters per room, read off the apple logits; the rooms of
-the wall layout from ``apples.rooms_from_walls``), so the count varies as fresh maps' does.
+input yields a valid map. ``apples="spread"`` (or ``"clusters"``, without its spacing and fitted
+shift) places them as the procedural generator does instead (``apples.placed_apples``: 1-3 round
+clusters per room, read off the apple logits; the rooms of the wall layout from
+``apples.rooms_from_walls``), so the count varies as fresh maps' does.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from worldagent.envs.harvest.apples import CLUSTERS, cluster_apples, rooms_from_walls
+from worldagent.envs.harvest.apples import CLUSTER_RULES, SPREAD, fit_shift, placed_apples, rooms_from_walls
 from worldagent.envs.harvest.world import HarvestMap, spawn_corners
 from worldagent.envs.repairs import nearest_index
 from worldagent.errors import WorldagentError
@@ -42,30 +43,35 @@ def corner_mask(height: int, width: int) -> np.ndarray:
     return mask
 
 
-def repair_maps(logits: jax.Array, apples: int | str, layouts: jax.Array | None = None) -> HarvestMap:
+def repaired_walls(wall_logit: jax.Array, layouts: jax.Array | None) -> jax.Array:
+    """bool[H, W]: the dataset layout f32[L, H·W] most probable under ``wall_logit`` f32[H, W] (clipped), or the
+    positive logits (``layouts`` None)."""
+    if layouts is None:
+        return wall_logit > 0
+    return layouts[nearest_index(wall_logit.reshape(1, -1), layouts)[0]].reshape(wall_logit.shape) > 0.5
+
+
+def repair_maps(logits: jax.Array, apples: int | str, layouts: jax.Array | None = None, shift: float | None = None) -> HarvestMap:
     """Valid maps with ``apples`` apples and free spawn corners from decoded logits.
 
     Args:
         logits: f32[2, H, W] (or [B, 2, H, W]) wall and apple logits.
-        apples: K, the number of apples every map gets, or ``"clusters"`` (``apples.cluster_apples``).
+        apples: K, the number of apples every map gets, or ``"spread"`` / ``"clusters"`` (``apples.placed_apples``).
         layouts: f32[L, H·W] 0/1 wall layouts to snap the walls to (the most probable one under
             the wall logits); None: walls where the wall logit is positive.
+        shift: the apple logits' shift of ``"spread"`` (None: none).
 
     Returns:
         ``HarvestMap`` with bool walls and apples of shape [H, W] (or [B, H, W]).
     """
     if logits.ndim == 4:
-        return jax.vmap(lambda one: repair_maps(one, apples, layouts))(logits)
+        return jax.vmap(lambda one: repair_maps(one, apples, layouts, shift))(logits)
     wall_logit, apple_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP), jnp.clip(logits[1], -LOGIT_CLIP, LOGIT_CLIP)
-    height, width = wall_logit.shape
-    if layouts is None:
-        walls = wall_logit > 0
-    else:
-        walls = layouts[nearest_index(wall_logit.reshape(1, -1), layouts)[0]].reshape(height, width) > 0.5
-    if apples == CLUSTERS:
-        walls = walls & ~jnp.asarray(corner_mask(height, width))
-        return HarvestMap(walls=walls, apples=cluster_apples(rooms_from_walls(walls), apple_logit))
-    return place_apples(walls, wall_logit, apple_logit, apples)
+    walls = repaired_walls(wall_logit, layouts)
+    if isinstance(apples, int):
+        return place_apples(walls, wall_logit, apple_logit, apples)
+    walls = walls & ~jnp.asarray(corner_mask(*walls.shape))
+    return HarvestMap(walls=walls, apples=placed_apples(rooms_from_walls(walls), apple_logit, apples, shift))
 
 
 def place_apples(walls: jax.Array, wall_logit: jax.Array, apple_logit: jax.Array, apples: int) -> HarvestMap:
@@ -93,17 +99,26 @@ def place_apples(walls: jax.Array, wall_logit: jax.Array, apple_logit: jax.Array
 
 
 def apple_setting(value, grid: tuple[int, int], worlds: HarvestMap) -> int | str:
-    """The ``apples`` setting of a harvest repair, checked: ``"clusters"``, or K from 1 to the non-corner
-    cells (None: the median count of ``worlds``, the dataset's)."""
-    if value == CLUSTERS:
-        return CLUSTERS
+    """The ``apples`` setting of a harvest repair, checked: ``"spread"``, ``"clusters"``, or K from 1 to the
+    non-corner cells (None: the median count of ``worlds``, the dataset's)."""
+    if value in CLUSTER_RULES:
+        return value
     count = median_apples(worlds) if value is None else value
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
-        raise ValueError(f"apples is a count K or {CLUSTERS!r} (as the generator places them)")  # make_repair names the setting
+        raise ValueError(f"apples is a count K, {SPREAD!r} or 'clusters' (as the generator places them)")  # make_repair names the setting
     free = int(np.prod(grid)) - 4
     if not 1 <= count <= free:
-        raise WorldagentError(f"apples={count}; pick between 1 and {free} (the non-corner cells of the map), or {CLUSTERS}.")
+        raise WorldagentError(f"apples={count}; pick between 1 and {free} (the non-corner cells of the map), or {SPREAD}.")
     return int(count)
+
+
+def shift_setting(value) -> float | None:
+    """The ``apple_shift`` setting, checked: a finite number, or None (fitted when the generator is made)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise WorldagentError(f"apple_shift={value!r}; give a number (a logit shift), or leave it out to fit it when the generator is made.")
+    return float(value)
 
 
 def threshold_maps(logits) -> HarvestMap:
@@ -118,6 +133,12 @@ def median_apples(worlds: HarvestMap) -> int:
     return int(np.median(apples.reshape(len(apples), -1).sum(axis=1)))
 
 
+def mean_apples(worlds: HarvestMap) -> float:
+    """The mean apple count of a batch of maps (what a fitted ``apple_shift`` matches)."""
+    apples = np.asarray(worlds.apples)
+    return float(apples.reshape(len(apples), -1).sum(axis=1).mean())
+
+
 def wall_layouts(worlds: HarvestMap) -> np.ndarray:
     """f32[L, H·W]: the distinct wall grids of a batch of maps, 0/1."""
     walls = np.asarray(worlds.walls, bool)
@@ -130,38 +151,55 @@ class HarvestRepair:
 
     Attributes:
         layouts: f32[L, H·W] the dataset's distinct wall layouts (``walls="nearest"``), or None.
-        apples: K, the apple count of every generated map, or ``"clusters"`` (static).
+        apples: K, the apple count of every generated map, or ``"spread"`` / ``"clusters"`` (static).
         grid: (H, W) of the maps (static).
+        apple_shift: the apple logits' shift of ``"spread"`` (``fitted``; None: not fitted, no shift) (static).
+        apple_target: the dataset's mean apple count, what ``fitted`` matches (static).
     """
 
     layouts: jax.Array | None
     apples: int | str = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
+    apple_shift: float | None = struct.field(pytree_node=False, default=None)
+    apple_target: float = struct.field(pytree_node=False, default=0.0)
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> HarvestRepair:
         """The repair for maps like ``dataset``'s.
 
-        ``config``: ``apples`` K (default: the dataset's median count) or "clusters" (as the generator
-        places them); ``walls`` "nearest" (default: the dataset layout the decoder finds most probable)
-        or "threshold".
+        ``config``: ``apples`` K (default: the dataset's median count), "spread" or "clusters" (as the
+        generator places them); ``apple_shift`` of "spread" (default: fitted when the generator is made);
+        ``walls`` "nearest" (default: the dataset layout the decoder finds most probable) or "threshold".
         """
         config = dict(config or {})
-        unknown = set(config) - {"apples", "walls"}
+        unknown = set(config) - {"apples", "apple_shift", "walls"}
         if unknown:
-            raise WorldagentError(f"unknown harvest repair setting(s) {sorted(unknown)}; use apples=K|clusters and walls=nearest|threshold.")
+            raise WorldagentError(
+                f"unknown harvest repair setting(s) {sorted(unknown)}; use apples=K|spread|clusters, apple_shift=X and walls=nearest|threshold."
+            )
         grid = tuple(int(s) for s in dataset.cell_shape[1:])
         count = apple_setting(config.get("apples") or None, grid, dataset.worlds)  # 0 in old generator.json files: the default
         rule = config.get("walls", "nearest")
         if rule not in WALL_RULES:
             raise WorldagentError(f"walls={rule!r}; pick one of {', '.join(WALL_RULES)}.")
         layouts = jnp.asarray(wall_layouts(dataset.worlds)) if rule == "nearest" else None
-        return cls(layouts, count, grid)
+        return cls(layouts, count, grid, shift_setting(config.get("apple_shift")), mean_apples(dataset.worlds))
 
     @property
     def config(self) -> dict:
-        return {"apples": self.apples, "walls": "threshold" if self.layouts is None else "nearest"}
+        shift = {"apple_shift": self.apple_shift} if self.apples == SPREAD else {}
+        return {"apples": self.apples, **shift, "walls": "threshold" if self.layouts is None else "nearest"}
+
+    def fitted(self, logits: jax.Array) -> HarvestRepair:
+        """This repair with ``apple_shift`` fitted on decoded logits f32[B, 2·H·W] of the prior (``apples.fit_shift``);
+        itself unless its apples are "spread" and no shift is set."""
+        if self.apples != SPREAD or self.apple_shift is not None:
+            return self
+        grids = jnp.clip(logits.reshape(-1, 2, *self.grid), -LOGIT_CLIP, LOGIT_CLIP)
+        corners = jnp.asarray(corner_mask(*self.grid))
+        rooms = jax.jit(jax.vmap(lambda wall_logit: rooms_from_walls(repaired_walls(wall_logit, self.layouts) & ~corners)))(grids[:, 0])
+        return self.replace(apple_shift=fit_shift(rooms, grids[:, 1], self.apple_target))
 
     def __call__(self, logits: jax.Array) -> HarvestMap:
         """Valid maps from decoded logits f32[B, 2·H·W]."""
-        return repair_maps(logits.reshape(-1, 2, *self.grid), self.apples, self.layouts)
+        return repair_maps(logits.reshape(-1, 2, *self.grid), self.apples, self.layouts, self.apple_shift)

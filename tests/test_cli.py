@@ -196,3 +196,14 @@ def test_train_refuses_bad_requests_in_one_line(tmp_path):
     for args, message in cases:
         result = runner.invoke(app, [*args, "--out", str(tmp_path / "x"), "--quiet"])
         assert result.exit_code == 2 and message in result.output, result.output
+
+
+def test_progress_bars_draw_on_stderr_so_stdout_stays_a_commands_output(capfd):
+    from worldagent.progress import progress_bar
+
+    with progress_bar("decoding", 3) as advance:
+        for _ in range(3):
+            advance()
+    print('{"json": 1}')
+    out, err = capfd.readouterr()
+    assert out == '{"json": 1}\n' and "decoding" in err

@@ -78,8 +78,9 @@ def planned_epochs(directory: Path) -> int:
         return 0
 
 
-def quality_figures(directory: Path, samples: int, seed: int) -> dict:
-    """Reconstruction, and the spec-driven figures of ``worlds.quality.figures``, of a saved generator."""
+def quality_figures(directory: Path, samples: int, seed: int, progress: bool = True) -> dict:
+    """Reconstruction, and the spec-driven figures of ``worlds.quality.figures``, of a saved generator (a bar over
+    its decodes with ``progress``)."""
     import jax
 
     from worldagent.worlds.generator import load_generator
@@ -88,7 +89,7 @@ def quality_figures(directory: Path, samples: int, seed: int) -> dict:
     if samples < 1:
         raise WorldagentError(f"--samples {samples}; draw at least 1 latent.")
     generator, vae, data = load_generator(directory)
-    return assess(generator, vae, data, samples, jax.random.key(seed))
+    return assess(generator, vae, data, samples, jax.random.key(seed), progress=progress)
 
 
 def key_figures(quality: dict) -> str:
@@ -216,7 +217,7 @@ def register(app: typer.Typer) -> None:
             f"trained {env} generator in {out}: kept epoch {last['epoch']} of {len(vae.history)}, loss {last['train_loss']:.1f}, "
             f"held-out {last['holdout_loss']:.1f}; repair: {repair_note}"
         )
-        quality = quality_figures(out, TRAIN_SAMPLES, 0)  # a quick look (~1,000 decodes); `generator report` measures more
+        quality = quality_figures(out, TRAIN_SAMPLES, 0, progress=not quiet)  # a quick look (~1,000 decodes); `generator report` measures more
         console.print(key_figures(quality), highlight=False)
         print_warnings(quality["warnings"])
 

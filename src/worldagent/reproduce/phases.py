@@ -158,7 +158,7 @@ def generator_phase(ctx: EnvContext) -> dict:
     vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=layout.generator_dir)
     generator = fit_repair(build_generator(vae, data, repair_name=ctx.preset.repair))
     save_generator(layout.generator_dir, vae, layout.dataset_path, generator)
-    quality = assess(generator, vae, data, QUALITY_SAMPLES, jax.random.key(ctx.seed), ctx.preset.accept_generator)
+    quality = assess(generator, vae, data, QUALITY_SAMPLES, jax.random.key(ctx.seed), ctx.preset.accept_generator, progress=ctx.progress)
     warnings, verdict, kept_epoch = quality["warnings"], quality["gate"], quality["training"]["kept_epoch"]
     quality_path = write_text(layout.quality_path, json.dumps(quality, indent=1))
     if verdict["verdict"] == "rejected":

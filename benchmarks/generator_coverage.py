@@ -8,7 +8,8 @@ precision and recall (Kynkäänniemi et al. 2019), density and coverage (Naeem e
 the fresh-against-fresh floor at a second, disjoint seed range; each descriptor's quantiles under G(z),
 fresh and dataset; where the env declares them, its generator parameters' spread. Also the wall time of
 the coverage figures alone. Recorded with ``machine.record("generator-coverage", ...)``; ``--update`` keeps
-the recorded generators not given (a row is replaced where its ``--generator`` path is given again).
+the recorded generators not given (a row is replaced where its ``--generator`` path is given again) and
+the recorded ``note``, ``--note TEXT`` after it.
 """
 
 from __future__ import annotations
@@ -41,17 +42,19 @@ def measure(directory: Path, decodes: int) -> dict:
     return {"env": generator.env, "repair": generator.repair_name, "dataset_worlds": len(data), "seconds": time.perf_counter() - start, **figures}
 
 
-def merged(rows: list[dict], decodes: int) -> list[dict]:
-    """The recorded rows with those of the same ``generator`` replaced by ``rows``, new ones appended (``--update``)."""
+def merged(rows: list[dict], decodes: int, note: str | None) -> dict:
+    """The recorded rows with those of the same ``generator`` replaced by ``rows``, new ones appended, and the
+    recorded note with ``note`` after it (``--update``)."""
     path = RESULTS / f"generator-coverage-{describe_machine()['backend']}.json"
     if not path.exists():
-        return rows
+        return {"generators": rows, **({"note": note} if note else {})}
     recorded = json.loads(path.read_text())
     if recorded["decodes"] != decodes:
         raise SystemExit(f"{path} was recorded with --decodes {recorded['decodes']}; rerun with it or without --update")
     fresh = {row["generator"]: row for row in rows}
     kept = [fresh.pop(row["generator"], row) for row in recorded["generators"]]
-    return kept + list(fresh.values())
+    notes = " ".join(text for text in (recorded.get("note"), note) if text)
+    return {"generators": kept + list(fresh.values()), **({"note": notes} if notes else {})}
 
 
 def main() -> None:
@@ -59,6 +62,7 @@ def main() -> None:
     parser.add_argument("--generator", type=Path, action="append", required=True, help="A generator directory (repeatable).")
     parser.add_argument("--decodes", type=int, default=1000)
     parser.add_argument("--update", action="store_true", help="keep the recorded generators not given here; replace those given")
+    parser.add_argument("--note", help="what the rows are (appended to the recorded note with --update)")
     args = parser.parse_args()
     rows = []
     for directory in args.generator:
@@ -73,7 +77,8 @@ def main() -> None:
             + (f"; parameter std ratio min {params['min_std_ratio']:.2f} median {params['median_std_ratio']:.2f}" if params else ""),
             flush=True,
         )
-    print(record("generator-coverage", {"decodes": args.decodes, "generators": merged(rows, args.decodes) if args.update else rows}))
+    result = merged(rows, args.decodes, args.note) if args.update else {"generators": rows, **({"note": args.note} if args.note else {})}
+    print(record("generator-coverage", {"decodes": args.decodes, **result}))
 
 
 if __name__ == "__main__":

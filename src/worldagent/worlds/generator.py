@@ -169,6 +169,8 @@ def fit_repair(generator: Generator) -> Generator:
         return generator
     z = jax.random.normal(jax.random.key(FIT_SEED), (FIT_LATENTS, generator.latent_dim))
     repair = generator.repair.fitted(generator.logits(z))
+    if repair is generator.repair:
+        return generator
     folded = repair.fold(*logits_layer(generator.params)) if hasattr(repair, "fold") else None
     return generator.replace(repair=repair, folded=folded)
 

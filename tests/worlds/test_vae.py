@@ -55,6 +55,21 @@ def test_killed_training_resumes_where_it_stopped(tmp_path, racing_data, small_v
     np.testing.assert_allclose(resumed.history[-1]["train_loss"], straight.history[-1]["train_loss"], rtol=1e-4)
 
 
+def test_a_finished_vae_copied_without_its_training_state_is_reused_and_an_unfinished_one_refused(tmp_path, racing_data, small_vae):
+    data = racing_data.subset(np.arange(96))
+    short = replace(small_vae, epochs=2)
+    trained = train_vae(data, short, progress=False, checkpoint_dir=tmp_path / "run")
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("vae.json", "vae.msgpack"):  # what a user copies of a trained generator
+        (copy / name).write_bytes((tmp_path / "run" / name).read_bytes())
+    reused = train_vae(data, short, progress=False, checkpoint_dir=copy)
+    assert reused.history == trained.history
+    jax.tree_util.tree_map(np.testing.assert_array_equal, reused.params, trained.params)
+    with pytest.raises(WorldagentError, match="trained 2 of 4 epochs.*--epochs 2"):
+        train_vae(data, replace(short, epochs=4), progress=False, checkpoint_dir=copy)
+
+
 def test_resuming_on_other_data_is_refused(tmp_path, racing_data, small_vae):
     train_vae(racing_data.subset(np.arange(64)), replace(small_vae, epochs=1), progress=False, checkpoint_dir=tmp_path)
     with pytest.raises(WorldagentError, match="other data or settings"):

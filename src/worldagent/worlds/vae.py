@@ -433,7 +433,16 @@ def _resume(directory, dataset, config: VAEConfig, optimizer):
         params, kept_params = (jax.tree_util.tree_map(jnp.asarray, state[name]) for name in ("params", "kept_params"))
         history = json.loads(state["history"])
         return params, state["opt_state"], history, kept_params, int(state["kept"]) or len(history)
-    opt_state = serialization.from_bytes(optimizer.init(previous.params), (Path(directory) / "optimizer.msgpack").read_bytes())
+    optimizer_file = Path(directory) / "optimizer.msgpack"
+    if not optimizer_file.exists():  # only the trained VAE (vae.json, vae.msgpack), e.g. copied from elsewhere
+        trained = len(previous.history)
+        if trained < config.epochs and not stopped_early(previous.history, config):
+            raise WorldagentError(
+                f"{directory} holds a VAE trained {trained} of {config.epochs} epochs but not where its training stands "
+                f"({STATE_FILE}); use it as it is with --epochs {trained}, or train again in a new --out directory."
+            )
+        return previous.params, optimizer.init(previous.params), previous.history, previous.params, previous.kept_epoch or trained
+    opt_state = serialization.from_bytes(optimizer.init(previous.params), optimizer_file.read_bytes())
     latest = Path(directory) / LATEST_FILE
     params = serialization.from_bytes(previous.params, latest.read_bytes()) if latest.exists() else previous.params
     params = jax.tree_util.tree_map(jnp.asarray, params)

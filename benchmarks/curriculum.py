@@ -36,7 +36,10 @@ Across seeds: means with 95% Student-t intervals, and whether each arm's interva
 evaluation worlds at once, paired by world (every agent plays the same worlds with the same
 episode keys), with a hierarchical bootstrap over seeds and worlds (``analysis.diff.pooled_difference``),
 and whether that interval excludes 0. Every step is cached under ``--work``: a killed run resumes. Writes
-``benchmarks/results/curriculum-<env>.json``.
+``benchmarks/results/curriculum-<env>.json`` after every arm, and beside it ``...-worlds.npz``, each agent's
+per-world values. A curriculum arm already recorded there with the same setup (``setup``: config, seeds,
+evaluation, and the generator's and evaluation worlds' fingerprints) is taken from there rather than trained
+again, so a run longer than one machine's life goes on from its committed results (``--retrain``: train it anyway).
 """
 
 from __future__ import annotations
@@ -69,6 +72,8 @@ from worldagent.files import write_text  # noqa: E402
 from worldagent.influence.cache import TRAINED_FILE  # noqa: E402
 from worldagent.influence.experiment import compared_metrics  # noqa: E402
 from worldagent.influence.statistics import mean_and_ci  # noqa: E402
+from worldagent.provenance import fingerprint  # noqa: E402
+from worldagent.search.given import cells_fingerprint  # noqa: E402
 from worldagent.search.objectives import generate  # noqa: E402
 from worldagent.store import RunStore  # noqa: E402
 
@@ -293,6 +298,39 @@ def pooled_vs_dr(values: dict[str, list[dict[str, np.ndarray]]]) -> dict:
     return out
 
 
+def worlds_file(out: Path) -> Path:
+    """Where each agent's per-world values are kept beside the results ``out``."""
+    return out.with_name(f"{out.stem}-worlds.npz")
+
+
+def save_world_values(out: Path, worlds_of: dict[str, list[dict[str, np.ndarray]]]) -> None:
+    """{arm/field: f64[S, W]} of every evaluated arm, compressed (what ``pooled_vs_dr`` needs)."""
+    arrays = {f"{arm}/{name}": np.stack([agent[name] for agent in agents]) for arm, agents in worlds_of.items() for name in agents[0]}
+    with open(worlds_file(out), "wb") as handle:
+        np.savez_compressed(handle, **arrays)
+
+
+def recorded_arms(out: Path, setup: dict) -> dict[str, dict]:
+    """{arm: {"arm", "per_seed", "worlds"}} of the curriculum arms that ``out`` recorded under the same
+    ``setup``, with their per-world values; empty when the file, its values or its setup differ."""
+    path = worlds_file(out)
+    if not (out.is_file() and path.is_file()):
+        return {}
+    recorded = json.loads(out.read_text())
+    if recorded.get("setup") != json.loads(json.dumps(setup, default=float)):
+        return {}
+    arrays = np.load(path)
+    found = {}
+    for arm, per_seed in recorded.get("per_seed", {}).items():
+        fields = sorted(key.split("/", 1)[1] for key in arrays.files if key.startswith(f"{arm}/"))
+        if arm in INFLUENCE_ARMS or not fields:
+            continue
+        seeds = len(per_seed)
+        worlds = [{name: arrays[f"{arm}/{name}"][i] for name in fields} for i in range(seeds)]
+        found[arm] = {"arm": recorded["arms"][arm], "per_seed": {int(seed): values for seed, values in per_seed.items()}, "worlds": worlds}
+    return found
+
+
 def compare(per_seed: dict[str, dict[int, dict]]) -> dict:
     """{stat: {arm: mean_and_ci over seeds, + overlaps_dr}}."""
     out: dict = {}
@@ -344,6 +382,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--repeats", type=int, default=8)
     parser.add_argument("--work", type=Path, default=None)
     parser.add_argument("--note", action="append", default=[], help="a sentence the JSON keeps (e.g. what else ran on the machine)")
+    parser.add_argument("--retrain", action="store_true", help="train and evaluate arms the results file already records")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
 
@@ -371,8 +410,28 @@ def main(argv=None) -> dict:
     suffix = "" if episodes == defaults["episodes"] else f"-{episodes}"
     suffix += "" if generator.repair_name == spec.default_repair else f"-{generator.repair_name}"  # e.g. curriculum-racing-open.json
     out = RESULTS / f"curriculum-{spec.name}{suffix}.json"
+    setup = {  # what an arm's recorded results depend on: the same setup reuses them (recorded_arms)
+        "env": spec.name,
+        "algorithm": algo,
+        "options": options,
+        "config": config.to_dict(),
+        "seeds": args.seeds,
+        "generator_fingerprint": fingerprint(generator, generator.env),
+        "evaluation_worlds_fingerprint": cells_fingerprint(spec, worlds),
+        "evaluation": {"worlds": args.eval_worlds, "repeats": args.repeats, "seed": EVAL_SEED},
+        "atlas_budget": args.atlas_budget,
+        "target": {"text": target_text, "maximize": args.maximize},
+        "curriculum_settings": settings,
+        "held_out": None if args.held_out is None else str(args.held_out),
+    }
+    recorded = {} if args.retrain else recorded_arms(out, setup)
     for done, arm in enumerate(args.arms, start=1):
-        if arm in INFLUENCE_ARMS:
+        if arm in recorded:
+            arms[arm], per_seed[arm], worlds_of[arm] = (recorded[arm][key] for key in ("arm", "per_seed", "worlds"))
+            print(f"{arm}: recorded in {out.name} under the same setup, not trained again (--retrain to)", flush=True)
+        elif arm in INFLUENCE_ARMS:
+            if not all(Path(d).is_dir() for d in arms["dr"]["dirs"]):
+                raise SystemExit(f"the {arm} arm needs dr's agents, which {out.name} records but --work does not hold; add --retrain.")
             counts = {"candidates": args.offline_search[0], "search_budget": args.offline_search[1], "repeats": args.repeats}
             counts["eval_worlds"] = args.influence_eval_worlds
             rounds = 1 if arm == "offline" else args.rounds
@@ -384,7 +443,7 @@ def main(argv=None) -> dict:
             curriculum = make_curriculum(arm, latents, settings if arm != "dr" else {}, target)
             trained = train_arm(spec, algo, config, options, curriculum, args.seeds, work / arm, not args.quiet)
             arms[arm] = {"curriculum": label(curriculum), **trained}
-        if "dirs" in arms[arm]:
+        if "dirs" in arms[arm] and arm not in recorded:
             per_seed[arm], seconds = {}, []
             for seed, agent_dir in zip(args.seeds, arms[arm]["dirs"]):
                 cache = work / "eval" / f"{arm}-s{seed}-w{args.eval_worlds}.npz"
@@ -408,6 +467,7 @@ def main(argv=None) -> dict:
             arms[arm]["evaluation_wall_seconds"] = None if None in seconds else round(sum(seconds), 1)  # None: cached before kept
         result = {
             "env": spec.name,
+            "setup": setup,
             "algorithm": algo,
             "options": options,
             "config": config.to_dict(),
@@ -430,6 +490,8 @@ def main(argv=None) -> dict:
             "machine": describe_machine(),
             "command": "python benchmarks/curriculum.py " + " ".join(sys.argv[1:] if argv is None else argv),
         }
+        if worlds_of:
+            save_world_values(out, worlds_of)
         write_text(out, json.dumps(result, indent=1, default=float))
         print(f"wrote {out} ({arm} done)", flush=True)
     return result

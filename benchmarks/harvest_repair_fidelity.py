@@ -5,11 +5,13 @@
 
 ``--decodes`` latents z ~ N(0, I) (key 0), decoded once and repaired by each repair, each fitted to
 the decoder as a new generator's is (``worlds.generator.fit_repair``): ``open`` (``OpenRooms``'
-defaults: apples spread, entrances by the tempered rule), ``open_clusters`` (what open generators
-saved from issue 48 until "spread" record: clusters without spacing or shift), ``open_top_k``
-(what open generators saved before issue 48 record: exactly K apples on the top-K cells, entrances
-by the posterior rule), ``nearest`` (the dataset layout the wall logits score highest, apples
-spread in the layout's rooms). Against as many
+defaults: wall and entrance shifts fitted, apples spread, entrances by the tempered rule),
+``open_unshifted`` (what open generators saved with "spread" before the wall and entrance fits
+record: no wall or entrance shift), ``open_clusters`` (what open generators saved from issue 48
+until "spread" record: clusters without spacing or shift), ``open_top_k`` (what open generators
+saved before issue 48 record: exactly K apples on the top-K cells, entrances by the posterior
+rule), ``nearest`` (the dataset layout the wall logits score highest, apples spread in the
+layout's rooms). Against as many
 fresh maps of the procedural generator at seeds past the dataset's largest (``worlds.coverage.fresh_worlds``),
 and a second fresh range beside them (``fresh_again``: what a perfect generator scores at this size).
 
@@ -112,13 +114,15 @@ def main() -> None:
     require_input(args.generator / "generator.json", "worldagent generator train harvest --out DIR")
     generator, vae, dataset = load_generator(args.generator)
     spec = registry.get("harvest")
+    unshifted = {"wall_shift": 0.0, "entrance_shift": 0.0}  # what generators saved before the wall and entrance fits record
     unfitted = {
         "open": OpenRooms.from_dataset(dataset),
-        "open_clusters": OpenRooms.from_dataset(dataset, {"apples": "clusters"}),
-        "open_top_k": OpenRooms.from_dataset(dataset, {"apples": median_apples(dataset.worlds), "entrances": "posterior"}),
+        "open_unshifted": OpenRooms.from_dataset(dataset, unshifted),
+        "open_clusters": OpenRooms.from_dataset(dataset, {"apples": "clusters", **unshifted}),
+        "open_top_k": OpenRooms.from_dataset(dataset, {"apples": median_apples(dataset.worlds), "entrances": "posterior", **unshifted}),
         "nearest": HarvestRepair.from_dataset(dataset, {"apples": "spread"}),
     }
-    repairs = {name: fit_repair(build_generator(vae, dataset, repair=repair)).repair for name, repair in unfitted.items()}
+    repairs = {name: fit_repair(build_generator(vae, dataset, repair=repair), dataset).repair for name, repair in unfitted.items()}
     z = jax.random.normal(jax.random.key(0), (args.decodes, generator.latent_dim))
     logits = jnp.asarray(generator.logits(z))
     layouts = wall_layouts(dataset.worlds)

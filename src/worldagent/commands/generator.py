@@ -56,7 +56,7 @@ def train_generator(
     data = WorldDataset.load(dataset_path, env=env)
     repaired = make_repair(data, repair, repair_name)
     vae = train_vae(data, config, progress=progress, checkpoint_dir=out)
-    generator = fit_repair(build_generator(vae, data, repair=repaired, repair_name=repair_name))
+    generator = fit_repair(build_generator(vae, data, repair=repaired, repair_name=repair_name), data)
     save_generator(out, vae, dataset_path, generator)
     used = dict(generator.repair.config)
     return vae, used, {name for name, value in used.items() if repaired.config.get(name) != value}

@@ -156,7 +156,7 @@ def generator_phase(ctx: EnvContext) -> dict:
     data = WorldDataset.load(layout.dataset_path, env=ctx.env)
     config = vae_config(ctx.preset, ctx.env)
     vae = train_vae(data, config, progress=ctx.progress, checkpoint_dir=layout.generator_dir)
-    generator = fit_repair(build_generator(vae, data, repair_name=ctx.preset.repair))
+    generator = fit_repair(build_generator(vae, data, repair_name=ctx.preset.repair), data)
     save_generator(layout.generator_dir, vae, layout.dataset_path, generator)
     quality = assess(generator, vae, data, QUALITY_SAMPLES, jax.random.key(ctx.seed), ctx.preset.accept_generator, progress=ctx.progress)
     warnings, verdict, kept_epoch = quality["warnings"], quality["gate"], quality["training"]["kept_epoch"]

@@ -160,15 +160,15 @@ def build_generator(
     return Generator(vae.params, repair, vae.model, dataset.env, tuple(vae.cell_shape), name, folded)
 
 
-def fit_repair(generator: Generator) -> Generator:
-    """G with its repair fitted to its decoder, when G is first made: a repair with ``fitted(logits f32[B, D])``
-    (e.g. harvest's spread apples, whose logit shift makes decodes of the prior hold the dataset's mean
-    apple count) sees ``FIT_LATENTS`` decodes of z ~ N(0, I) and records what it fitted in its config,
-    so a saved G decodes as it did without fitting again. G itself when its repair fits nothing."""
+def fit_repair(generator: Generator, dataset: WorldDataset) -> Generator:
+    """G with its repair fitted to its decoder, when G is first made: a repair with ``fitted(logits f32[B, D],
+    worlds)`` (e.g. harvest's, whose logit shifts make decodes of the prior hold the rooms and apples of the
+    training ``dataset``'s worlds) sees ``FIT_LATENTS`` decodes of z ~ N(0, I) and records what it fitted in
+    its config, so a saved G decodes as it did without fitting again. G itself when its repair fits nothing."""
     if not hasattr(generator.repair, "fitted"):
         return generator
     z = jax.random.normal(jax.random.key(FIT_SEED), (FIT_LATENTS, generator.latent_dim))
-    repair = generator.repair.fitted(generator.logits(z))
+    repair = generator.repair.fitted(generator.logits(z), dataset.worlds)
     if repair is generator.repair:
         return generator
     folded = repair.fold(*logits_layer(generator.params)) if hasattr(repair, "fold") else None

@@ -201,7 +201,7 @@ def test_jit_and_vmap_agree_with_one_call(random_repaired):
 
 def test_from_dataset_settings_and_config(harvest_data):
     default = OpenRooms.from_dataset(harvest_data)
-    assert default.config == {"apples": "spread", "apple_shift": None, "rounds": 1, "entrances": "tempered"}  # shift: fitted with its generator
+    assert default.config == {"apples": "spread", "apple_shift": None, "rounds": 1, "entrances": "tempered"}  # shifts: fitted with its generator
     assert OpenRooms.from_dataset(harvest_data, {"apples": median_apples(harvest_data.worlds)}).apples == median_apples(harvest_data.worlds)
     chosen = OpenRooms.from_dataset(harvest_data, {"apples": 12, "rounds": 2, "entrances": "likelihood"})
     assert OpenRooms.from_dataset(harvest_data, json.loads(json.dumps(chosen.config))) == chosen
@@ -222,6 +222,8 @@ def test_from_dataset_settings_and_config(harvest_data):
         ({"entrances": "never"}, "entrances"),
         ({"apple_shift": "high"}, "apple_shift"),
         ({"apple_shift": float("nan")}, "apple_shift"),
+        ({"wall_shift": "1"}, "wall_shift"),
+        ({"entrance_shift": float("inf")}, "entrance_shift"),
     ],
 )
 def test_bad_settings_are_one_line_errors(harvest_data, config, match):
@@ -236,3 +238,31 @@ def test_a_trained_generator_with_the_open_repair_decodes_valid_maps(harvest_vae
     generator = build_generator(harvest_vae, harvest_data, repair=OpenRooms.from_dataset(harvest_data, {"apples": APPLES}))
     maps = jax.jit(lambda g, z: g(z))(generator, jax.random.normal(jax.random.key(0), (8, generator.latent_dim)))
     check_valid(maps)
+
+
+def test_a_new_generator_fits_its_walls_entrances_and_apples_to_the_data(harvest_vae, harvest_data, monkeypatch):
+    """Each of the generator's draws at the data's rate on the decodes it was fitted on: rooms per map (the
+    wall shift), the share of merged regions given an entrance (the entrance shift: the generator's
+    probability) and apples per map. The tiny VAE's walls are faint: unshifted, the search finds almost no room."""
+    from worldagent.envs.harvest import open_repair
+    from worldagent.envs.harvest.repair import mean_apples
+    from worldagent.worlds import generator as generator_module
+
+    batch = 32  # decodes and dataset maps alike: one compile of the room search serves both
+    monkeypatch.setattr(generator_module, "FIT_LATENTS", batch)
+    monkeypatch.setattr(open_repair, "FIT_MAPS", batch)
+    unfitted = generator_module.build_generator(harvest_vae, harvest_data, repair=OpenRooms.from_dataset(harvest_data))
+    generator = generator_module.fit_repair(unfitted, harvest_data)
+    repair = generator.repair
+    assert all(isinstance(repair.config[name], float) for name in ("wall_shift", "entrance_shift", "apple_shift"))
+    assert generator_module.fit_repair(generator, harvest_data) is generator  # fitted once
+
+    z = jax.random.normal(jax.random.key(generator_module.FIT_SEED), (batch, generator.latent_dim))
+    wall_logits = generator.logits(z).reshape(-1, 2, SIZE, SIZE)[:, 0]
+    target = open_repair.mean_rooms(open_repair.layout_logits(harvest_data.worlds.walls[:batch]))
+    assert open_repair.mean_rooms(wall_logits) < target / 2
+    assert abs(open_repair.mean_rooms(wall_logits, wall_shift=repair.wall_shift) - target) <= 0.15 * target
+    candidates = open_repair.region_candidates(wall_logits, repair.wall_shift)
+    assert abs(open_repair.entrance_share(wall_logits, candidates, offset=repair.entrance_shift) - 0.5) <= 0.1
+    counts = np.asarray(generator(z).apples).sum(axis=(1, 2))
+    assert abs(counts.mean() - mean_apples(harvest_data.worlds)) <= 0.05 * mean_apples(harvest_data.worlds)

@@ -232,10 +232,16 @@ def fit_shift(rooms: jax.Array, apple_logit: jax.Array, target: float) -> float:
         apple_logit: f32[B, H, W] their apple logits (clipped as the repair clips them).
         target: the mean apple count wanted (the dataset's).
     """
-    low, high = SHIFT_RANGE
-    for _ in range(SHIFT_STEPS):  # more shift, more clusters gain: the count grows with it (up to greedy ties)
+    # more shift, more clusters gain: the count grows with it (up to greedy ties)
+    return bisect(lambda shift: float(_mean_spread_count(shift, rooms, apple_logit)), target, SHIFT_RANGE, SHIFT_STEPS)
+
+
+def bisect(measure, target: float, bounds: tuple[float, float], steps: int) -> float:
+    """The x within ``bounds`` where ``measure(x)``, growing with x, meets ``target``: ``steps`` halvings, to 0.001."""
+    low, high = bounds
+    for _ in range(steps):
         middle = (low + high) / 2
-        low, high = (middle, high) if float(_mean_spread_count(middle, rooms, apple_logit)) < target else (low, middle)
+        low, high = (middle, high) if measure(middle) < target else (low, middle)
     return round((low + high) / 2, 3)
 
 

@@ -39,6 +39,17 @@ n candidates with p / n; carving cell c multiplies the likelihood by ``r_c = exp
 Saved generators record their rule (``config``), so those saved before ``tempered`` decode as
 they did.
 
+Calibrated to the decoder (``fitted``, once, when a generator is made). The rules above are exact for
+confident logits, and decodes of the prior are not: on the quick preset's 20-epoch VAE the unshifted
+search found 0.98 rooms a map against the dataset's 1.94, and the tempered rule gave 28% of merged
+regions an entrance against the generator's half. Like the apples' shift, two constants put each
+of the generator's draws at its rate on 256 decodes of the prior: ``wall_shift``, added to the wall
+logits before the rooms are chosen, so that they hold the dataset's mean number of rooms
+(``fit_wall_shift``, the target read off 256 dataset maps by the same search, ``mean_rooms``), and
+``entrance_shift``, which lowers the entrance rule's bar so that the generator's share of merged
+regions gets an entrance (``fit_entrance_shift``; the entrances are carved by the unshifted
+logits). Generators saved before record neither and decode without them.
+
 Search. Corners interact through merging: where rectangles overlap, each one's edges are hidden,
 and one corner at a time gets stuck (on 200 generated maps given as confident logits, coordinate
 ascent over single corners recovered 70–89% of the walls). So the search moves two corners at a
@@ -74,16 +85,19 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from worldagent.envs.harvest.apples import SPREAD, fit_shift, placed_apples
+from worldagent.envs.harvest.apples import SHIFT_RANGE, SHIFT_STEPS, SPREAD, bisect, fit_shift, placed_apples
 from worldagent.envs.harvest.maps import NUM_CORNERS, MapConfig, corner_bounds, entrance_candidates, region_walls
 from worldagent.envs.harvest.repair import LOGIT_CLIP, apple_setting, corner_mask, mean_apples, place_apples, shift_setting
 from worldagent.envs.harvest.world import HarvestMap
 from worldagent.errors import WorldagentError
 
-SETTINGS = ("apples", "apple_shift", "rounds", "entrances")
+SETTINGS = ("apples", "apple_shift", "wall_shift", "entrance_shift", "rounds", "entrances")
 ENTRANCE_RULES = ("tempered", "posterior", "likelihood")  # the first is the default
 TEMPER = 1.5  # the exponent T of the tempered rule (module doc)
 DEFAULT_ROUNDS = 1  # a second round recovered 2 more of 1,000 generated maps at twice the cost
+FIT_MAPS = 256  # dataset maps whose rooms give the wall shift's target (``mean_rooms``; ~5 s on 2 cores)
+WALL_SHIFT_RANGE = (-3.0, 5.0)  # where the wall shift is looked for: the quick VAE's is about 1
+WALL_SHIFT_STEPS = 7  # to 0.06 logits (about 0.06 rooms a map); each step searches the rooms of 256 decodes (~5 s on 2 cores)
 MAX_ROUNDS = 8
 
 # A frame shows the grid so that the corners moved are its left side (TL, BL): transposed?,
@@ -220,26 +234,34 @@ def block_step(views: jax.Array, choice: jax.Array, frame: jax.Array) -> jax.Arr
     return choice.at[moved].set(swap[jnp.stack([best // count, best % count])])
 
 
-def carve_best_entrances(wall_logit: jax.Array, walls: jax.Array, group_masks: jax.Array, rule: str = ENTRANCE_RULES[0]) -> jax.Array:
-    """bool[H, W]: per merged region, its entrance candidate with the lowest wall logit, if the region gets an entrance.
+def entrance_decisions(wall_logit: jax.Array, candidates: jax.Array, rule: str = ENTRANCE_RULES[0], offset: float = 0.0) -> jax.Array:
+    """bool[4]: whether each merged region gets an entrance, from its candidate cells ``candidates`` bool[4, H·W].
 
-    ``rule`` (module doc): "likelihood", iff that logit is negative; "posterior", iff an entrance is
-    more probable than none under the generator's prior (none with probability 1 − p, each of the
-    n candidates with p / n) times the likelihood (carving cell c multiplies it by ``r_c = exp(−l_c)``),
-    summed over where it is: ``Σ_c r_c > n (1 − p) / p``; "tempered", the same with the L^T norm
-    of the ratios, ``(Σ_c r_c^T)^(1/T) > n (1 − p) / p``, ``T = TEMPER``.
+    ``rule`` (module doc): "likelihood", iff the lowest candidate logit is below ``offset`` (0 unfitted);
+    "posterior", iff an entrance is more probable than none under the generator's prior (none with
+    probability 1 − p, each of the n candidates with p / n) times the likelihood (carving cell c
+    multiplies it by ``r_c = exp(−l_c)``), summed over where it is: ``Σ_c r_c > n (1 − p) / p``;
+    "tempered", the same with the L^T norm of the ratios, ``(Σ_c r_c^T)^(1/T) > n (1 − p) / p``,
+    ``T = TEMPER``. ``offset`` (the fitted ``entrance_shift``) lowers either bar by that many logits.
     """
-    candidates = entrance_candidates(walls, group_masks).reshape(NUM_CORNERS, -1)
     logit = wall_logit.reshape(1, -1)
-    lowest = jnp.where(candidates, logit, jnp.inf)
     if rule == "likelihood":
-        carve = lowest.min(axis=1) < 0
-    else:
-        power = TEMPER if rule == "tempered" else 1.0
-        chance = MapConfig().entrance_probability
-        evidence = jax.nn.logsumexp(jnp.where(candidates, -power * logit, -jnp.inf), axis=1) / power
-        carve = evidence > jnp.log(jnp.maximum(candidates.sum(axis=1), 1)) + np.log((1.0 - chance) / chance)
-    chosen = jax.nn.one_hot(jnp.argmin(lowest, axis=1), lowest.shape[1], dtype=bool) & (carve & candidates.any(axis=1))[:, None]
+        return jnp.where(candidates, logit, jnp.inf).min(axis=1) < offset
+    power = TEMPER if rule == "tempered" else 1.0
+    chance = MapConfig().entrance_probability
+    evidence = jax.nn.logsumexp(jnp.where(candidates, -power * logit, -jnp.inf), axis=1) / power
+    return evidence > jnp.log(jnp.maximum(candidates.sum(axis=1), 1)) + np.log((1.0 - chance) / chance) - offset
+
+
+def carve_best_entrances(
+    wall_logit: jax.Array, walls: jax.Array, group_masks: jax.Array, rule: str = ENTRANCE_RULES[0], offset: float = 0.0
+) -> jax.Array:
+    """bool[H, W]: per merged region, its entrance candidate with the lowest wall logit, if the region gets an
+    entrance (``entrance_decisions``)."""
+    candidates = entrance_candidates(walls, group_masks).reshape(NUM_CORNERS, -1)
+    lowest = jnp.where(candidates, wall_logit.reshape(1, -1), jnp.inf)
+    carve = entrance_decisions(wall_logit, candidates, rule, offset) & candidates.any(axis=1)
+    chosen = jax.nn.one_hot(jnp.argmin(lowest, axis=1), lowest.shape[1], dtype=bool) & carve[:, None]
     return chosen.any(axis=0).reshape(walls.shape)
 
 
@@ -281,27 +303,94 @@ def choose_rooms(wall_logit: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str 
     return finals[jnp.argmax(layout_scores(wall_logit, finals, rule))]
 
 
-def open_layout(logits: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> tuple[jax.Array, jax.Array]:
-    """(walls bool[S, S], rooms bool[R, S, S]) from logits f32[2, S, S]: the generator layout the wall logits find
-    most probable, entrances carved, and its rooms as the generator's apple step sees them (``maps.generate_map``)."""
+def chosen_rooms(wall_logit: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0], wall_shift: float = 0.0) -> jax.Array:
+    """int32[4]: ``choose_rooms`` on the wall logits f32[S, S] shifted by ``wall_shift``, then clipped."""
+    return choose_rooms(jnp.clip(wall_logit + wall_shift, -LOGIT_CLIP, LOGIT_CLIP), rounds, rule)
+
+
+def open_layout(
+    logits: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0], wall_shift: float = 0.0, entrance_shift: float = 0.0
+) -> tuple[jax.Array, jax.Array]:
+    """(walls bool[S, S], rooms bool[R, S, S]) from logits f32[2, S, S]: the generator layout the wall logits
+    (shifted by ``wall_shift``) find most probable, entrances carved by the unshifted ones (the rule's bar
+    lowered by ``entrance_shift``), and its rooms as the generator's apple step sees them (``maps.generate_map``)."""
     wall_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP)
     size = wall_logit.shape[0]
-    group_masks, closed = region_walls(*rooms_of(choose_rooms(wall_logit, rounds, rule), size), size)
-    walls = closed & ~carve_best_entrances(wall_logit, closed, group_masks, rule)
+    group_masks, closed = region_walls(*rooms_of(chosen_rooms(logits[0], rounds, rule, wall_shift), size), size)
+    walls = closed & ~carve_best_entrances(wall_logit, closed, group_masks, rule, entrance_shift)
     return walls, jnp.concatenate([group_masks & ~closed[None], ~group_masks.any(axis=0)[None]])
 
 
 def open_map(
-    logits: jax.Array, apples: int | str, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0], shift: float | None = None
+    logits: jax.Array,
+    apples: int | str,
+    rounds: int = DEFAULT_ROUNDS,
+    rule: str = ENTRANCE_RULES[0],
+    shift: float | None = None,
+    wall_shift: float = 0.0,
+    entrance_shift: float = 0.0,
 ) -> HarvestMap:
     """One valid map from logits f32[2, S, S]: ``open_layout``'s walls, its apples in clusters (``apples`` "spread"
     shifted by ``shift``, or "clusters") or on the K free cells with the highest logits (``apples=K``)."""
     wall_logit, apple_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP), jnp.clip(logits[1], -LOGIT_CLIP, LOGIT_CLIP)
-    walls, rooms = open_layout(logits, rounds, rule)
+    walls, rooms = open_layout(logits, rounds, rule, wall_shift, entrance_shift)
     if isinstance(apples, int):
         return place_apples(walls, wall_logit, apple_logit, apples)
     size = wall_logit.shape[0]
     return HarvestMap(walls=walls & ~jnp.asarray(corner_mask(size, size)), apples=placed_apples(rooms, apple_logit, apples, shift))
+
+
+@functools.partial(jax.jit, static_argnames=("rounds", "rule"))
+def _mean_rooms(wall_shift: float, wall_logits: jax.Array, rounds: int, rule: str) -> jax.Array:
+    return jax.vmap(lambda logit: (chosen_rooms(logit, rounds, rule, wall_shift) > 0).sum())(wall_logits).mean()
+
+
+def mean_rooms(wall_logits: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0], wall_shift: float = 0.0) -> float:
+    """The mean number of corners with a room in the layouts found for wall logits f32[B, S, S] shifted by ``wall_shift``."""
+    return float(_mean_rooms(wall_shift, jnp.asarray(wall_logits, jnp.float32), rounds, rule))
+
+
+def layout_logits(walls: jax.Array) -> jax.Array:
+    """f32[B, S, S]: maps' walls bool[B, S, S] as confident wall logits (the search finds their own layouts)."""
+    return jnp.where(jnp.asarray(walls), LOGIT_CLIP, -LOGIT_CLIP)
+
+
+def fit_wall_shift(wall_logits: jax.Array, target: float, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> float:
+    """The wall-logit shift with which the layouts found for decodes f32[B, S, S] have ``target`` rooms on average
+    (the dataset's): a blurry decoder's walls are faint, and unshifted the search finds too few rooms."""
+    return bisect(lambda shift: mean_rooms(wall_logits, rounds, rule, shift), target, WALL_SHIFT_RANGE, WALL_SHIFT_STEPS)
+
+
+def region_candidates(wall_logits: jax.Array, wall_shift: float, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> jax.Array:
+    """bool[B, 4, S·S]: each merged region's entrance candidates in the layouts found for wall logits f32[B, S, S]."""
+    size = wall_logits.shape[-1]
+
+    def one(logit):
+        group_masks, closed = region_walls(*rooms_of(chosen_rooms(logit, rounds, rule, wall_shift), size), size)
+        return entrance_candidates(closed, group_masks).reshape(NUM_CORNERS, -1)
+
+    return jax.jit(jax.vmap(one))(wall_logits)
+
+
+@functools.partial(jax.jit, static_argnames="rule")
+def _entrance_share(offset: float, wall_logits: jax.Array, candidates: jax.Array, rule: str) -> jax.Array:
+    possible = candidates.any(axis=-1)
+    clipped = jnp.clip(wall_logits, -LOGIT_CLIP, LOGIT_CLIP)
+    carve = jax.vmap(lambda logit, cells: entrance_decisions(logit, cells, rule, offset))(clipped, candidates)
+    return (carve & possible).sum() / jnp.maximum(possible.sum(), 1)
+
+
+def entrance_share(wall_logits: jax.Array, candidates: jax.Array, rule: str = ENTRANCE_RULES[0], offset: float = 0.0) -> float:
+    """The share of merged regions with a candidate (``region_candidates``) that get an entrance (``entrance_decisions``)."""
+    return float(_entrance_share(offset, wall_logits, candidates, rule))
+
+
+def fit_entrance_shift(wall_logits: jax.Array, wall_shift: float, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> float:
+    """The offset of the entrance rule's bar with which the merged regions of decodes f32[B, S, S] get an entrance
+    as often as the generator gives one (``MapConfig.entrance_probability``)."""
+    candidates = region_candidates(wall_logits, wall_shift, rounds, rule)
+    chance = MapConfig().entrance_probability
+    return bisect(lambda offset: entrance_share(wall_logits, candidates, rule, offset), chance, SHIFT_RANGE, SHIFT_STEPS)
 
 
 def _count(name: str, value, low: int, high: int, hint: str) -> int:
@@ -320,7 +409,8 @@ class OpenRooms:
         entrances: "tempered" (default), "posterior" or "likelihood", the entrance rule (``carve_best_entrances``, static).
         grid: (S, S) of the maps (static).
         apple_shift: the apple logits' shift of ``"spread"`` (``fitted``; None: not fitted, no shift) (static).
-        apple_target: the dataset's mean apple count, what ``fitted`` matches (static).
+        wall_shift: the wall logits' shift before the rooms are chosen (``fitted``; None: not fitted, no shift) (static).
+        entrance_shift: how far the entrance rule's bar is lowered (``fitted``; None: not fitted, 0) (static).
     """
 
     apples: int | str = struct.field(pytree_node=False)
@@ -328,23 +418,25 @@ class OpenRooms:
     entrances: str = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
     apple_shift: float | None = struct.field(pytree_node=False, default=None)
-    apple_target: float = struct.field(pytree_node=False, default=0.0)
+    wall_shift: float | None = struct.field(pytree_node=False, default=None)
+    entrance_shift: float | None = struct.field(pytree_node=False, default=None)
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> OpenRooms:
         """The repair for maps like ``dataset``'s (a harvest ``WorldDataset``).
 
         ``config``: ``apples`` "spread" (default: as the generator places them, kept apart), "clusters"
-        or K (exactly K on the cells with the highest apple logits); ``apple_shift`` (default: fitted
-        when the generator is made); ``rounds`` (default 1); ``entrances`` "tempered" (default),
-        "posterior" (what generators saved before then record) or "likelihood".
+        or K (exactly K on the cells with the highest apple logits); ``apple_shift``, ``wall_shift`` and
+        ``entrance_shift`` (default: fitted when the generator is made; generators saved before the wall
+        and entrance shifts decode without them); ``rounds`` (default 1); ``entrances`` "tempered"
+        (default), "posterior" (what generators saved before then record) or "likelihood".
         """
         config = dict(config or {})
         unknown = set(config) - set(SETTINGS)
         if unknown:
             raise WorldagentError(
                 f"unknown setting(s) {sorted(unknown)} of harvest's open repair; "
-                "use apples=spread|clusters|K, apple_shift=X, rounds=N and entrances=tempered|posterior|likelihood."
+                "use apples=spread|clusters|K, apple_shift=X, wall_shift=X, entrance_shift=X, rounds=N and entrances=tempered|posterior|likelihood."
             )
         grid = tuple(int(s) for s in dataset.cell_shape[1:])
         if grid[0] != grid[1] or grid[0] < 10:  # the generator's rooms are 5 to side - 5 cells
@@ -357,24 +449,40 @@ class OpenRooms:
         entrances = config.get("entrances", ENTRANCE_RULES[0])
         if entrances not in ENTRANCE_RULES:
             raise WorldagentError(f"entrances={entrances!r}; pick one of {', '.join(ENTRANCE_RULES)}.")
-        return cls(apples, rounds, entrances, grid, shift_setting(config.get("apple_shift")), mean_apples(dataset.worlds))
+        shifts = {name: shift_setting(config.get(name), name) for name in ("apple_shift", "wall_shift", "entrance_shift")}
+        return cls(apples, rounds, entrances, grid, **shifts)
 
     @property
     def config(self) -> dict:
         """The settings that rebuild this repair (``from_dataset(dataset, config)``)."""
         shift = {"apple_shift": self.apple_shift} if self.apples == SPREAD else {}
-        return {"apples": self.apples, **shift, "rounds": self.rounds, "entrances": self.entrances}
+        walls = {name: value for name, value in (("wall_shift", self.wall_shift), ("entrance_shift", self.entrance_shift)) if value is not None}
+        return {"apples": self.apples, **shift, **walls, "rounds": self.rounds, "entrances": self.entrances}
 
-    def fitted(self, logits: jax.Array) -> OpenRooms:
-        """This repair with ``apple_shift`` fitted on decoded logits f32[B, 2·S·S] of the prior (``apples.fit_shift``);
-        itself unless its apples are "spread" and no shift is set."""
-        if self.apples != SPREAD or self.apple_shift is not None:
+    def fitted(self, logits: jax.Array, worlds: HarvestMap) -> OpenRooms:
+        """This repair calibrated on decoded logits f32[B, 2·S·S] of the prior, so that its decodes have the
+        dataset ``worlds``' rooms per map (``wall_shift``), the generator's share of entrances
+        (``entrance_shift``) and, for "spread" apples, the dataset's apples per map (``apple_shift``), in that
+        order: each draw of the generator at its rate. Shifts already set are kept; itself if none is missing."""
+        if None not in (self.wall_shift, self.entrance_shift) and (self.apples != SPREAD or self.apple_shift is not None):
             return self
         grids = logits.reshape(-1, 2, *self.grid)
-        rooms = jax.jit(jax.vmap(lambda one: open_layout(one, self.rounds, self.entrances)[1]))(grids)
-        return self.replace(apple_shift=fit_shift(rooms, jnp.clip(grids[:, 1], -LOGIT_CLIP, LOGIT_CLIP), self.apple_target))
+        wall_shift = self.wall_shift
+        if wall_shift is None:
+            target = mean_rooms(layout_logits(worlds.walls[:FIT_MAPS]), self.rounds, self.entrances)
+            wall_shift = fit_wall_shift(grids[:, 0], target, self.rounds, self.entrances)
+        entrance_shift = self.entrance_shift
+        if entrance_shift is None:
+            entrance_shift = fit_entrance_shift(grids[:, 0], wall_shift, self.rounds, self.entrances)
+        repair = self.replace(wall_shift=wall_shift, entrance_shift=entrance_shift)
+        if self.apples != SPREAD or self.apple_shift is not None:
+            return repair
+        layout = functools.partial(open_layout, rounds=self.rounds, rule=self.entrances, wall_shift=wall_shift, entrance_shift=entrance_shift)
+        rooms = jax.jit(jax.vmap(lambda one: layout(one)[1]))(grids)
+        return repair.replace(apple_shift=fit_shift(rooms, jnp.clip(grids[:, 1], -LOGIT_CLIP, LOGIT_CLIP), mean_apples(worlds)))
 
     def __call__(self, logits: jax.Array) -> HarvestMap:
         """Valid maps from decoded logits f32[B, 2·S·S] (walls, then apples): ``HarvestMap`` of bool[B, S, S]."""
         grids = logits.reshape(-1, 2, *self.grid)
-        return jax.vmap(lambda one: open_map(one, self.apples, self.rounds, self.entrances, self.apple_shift))(grids)
+        wall_shift, entrance_shift = self.wall_shift or 0.0, self.entrance_shift or 0.0
+        return jax.vmap(lambda one: open_map(one, self.apples, self.rounds, self.entrances, self.apple_shift, wall_shift, entrance_shift))(grids)

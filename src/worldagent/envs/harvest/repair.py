@@ -112,12 +112,12 @@ def apple_setting(value, grid: tuple[int, int], worlds: HarvestMap) -> int | str
     return int(count)
 
 
-def shift_setting(value) -> float | None:
-    """The ``apple_shift`` setting, checked: a finite number, or None (fitted when the generator is made)."""
+def shift_setting(value, name: str = "apple_shift") -> float | None:
+    """A logit shift setting ``name``, checked: a finite number, or None (fitted when the generator is made)."""
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise WorldagentError(f"apple_shift={value!r}; give a number (a logit shift), or leave it out to fit it when the generator is made.")
+        raise WorldagentError(f"{name}={value!r}; give a number (a logit shift), or leave it out to fit it when the generator is made.")
     return float(value)
 
 
@@ -154,14 +154,12 @@ class HarvestRepair:
         apples: K, the apple count of every generated map, or ``"spread"`` / ``"clusters"`` (static).
         grid: (H, W) of the maps (static).
         apple_shift: the apple logits' shift of ``"spread"`` (``fitted``; None: not fitted, no shift) (static).
-        apple_target: the dataset's mean apple count, what ``fitted`` matches (static).
     """
 
     layouts: jax.Array | None
     apples: int | str = struct.field(pytree_node=False)
     grid: tuple = struct.field(pytree_node=False)
     apple_shift: float | None = struct.field(pytree_node=False, default=None)
-    apple_target: float = struct.field(pytree_node=False, default=0.0)
 
     @classmethod
     def from_dataset(cls, dataset, config=None) -> HarvestRepair:
@@ -183,22 +181,22 @@ class HarvestRepair:
         if rule not in WALL_RULES:
             raise WorldagentError(f"walls={rule!r}; pick one of {', '.join(WALL_RULES)}.")
         layouts = jnp.asarray(wall_layouts(dataset.worlds)) if rule == "nearest" else None
-        return cls(layouts, count, grid, shift_setting(config.get("apple_shift")), mean_apples(dataset.worlds))
+        return cls(layouts, count, grid, shift_setting(config.get("apple_shift")))
 
     @property
     def config(self) -> dict:
         shift = {"apple_shift": self.apple_shift} if self.apples == SPREAD else {}
         return {"apples": self.apples, **shift, "walls": "threshold" if self.layouts is None else "nearest"}
 
-    def fitted(self, logits: jax.Array) -> HarvestRepair:
-        """This repair with ``apple_shift`` fitted on decoded logits f32[B, 2·H·W] of the prior (``apples.fit_shift``);
-        itself unless its apples are "spread" and no shift is set."""
+    def fitted(self, logits: jax.Array, worlds: HarvestMap) -> HarvestRepair:
+        """This repair with ``apple_shift`` fitted on decoded logits f32[B, 2·H·W] of the prior (``apples.fit_shift``)
+        so that they hold the dataset ``worlds``' mean apple count; itself unless its apples are "spread" and no shift is set."""
         if self.apples != SPREAD or self.apple_shift is not None:
             return self
         grids = jnp.clip(logits.reshape(-1, 2, *self.grid), -LOGIT_CLIP, LOGIT_CLIP)
         corners = jnp.asarray(corner_mask(*self.grid))
         rooms = jax.jit(jax.vmap(lambda wall_logit: rooms_from_walls(repaired_walls(wall_logit, self.layouts) & ~corners)))(grids[:, 0])
-        return self.replace(apple_shift=fit_shift(rooms, grids[:, 1], self.apple_target))
+        return self.replace(apple_shift=fit_shift(rooms, grids[:, 1], mean_apples(worlds)))
 
     def __call__(self, logits: jax.Array) -> HarvestMap:
         """Valid maps from decoded logits f32[B, 2·H·W]."""

@@ -248,7 +248,7 @@ def test_a_new_generator_fits_its_walls_entrances_and_apples_to_the_data(harvest
     from worldagent.envs.harvest.repair import mean_apples
     from worldagent.worlds import generator as generator_module
 
-    batch = 32  # decodes and dataset maps alike: one compile of the room search serves both
+    batch = 16  # decodes and dataset maps alike: one compile of the room search serves both
     monkeypatch.setattr(generator_module, "FIT_LATENTS", batch)
     monkeypatch.setattr(open_repair, "FIT_MAPS", batch)
     unfitted = generator_module.build_generator(harvest_vae, harvest_data, repair=OpenRooms.from_dataset(harvest_data))

@@ -4,20 +4,12 @@ with its per-world values, is taken from there; any change to the setup trains i
 Pure file round trips: no agent is trained.
 """
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
-
-
-def load_curriculum():
-    spec = importlib.util.spec_from_file_location("curriculum_benchmark", BENCHMARKS / "curriculum.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from benchmark_scripts import load_benchmark
 
 
 def agent(seed: int) -> dict[str, np.ndarray]:
@@ -35,7 +27,7 @@ def write_results(curriculum, out: Path, setup: dict) -> dict:
 
 
 def test_an_arm_recorded_under_the_same_setup_is_reused_with_its_world_values(tmp_path):
-    curriculum = load_curriculum()
+    curriculum = load_benchmark("curriculum")
     out, setup = tmp_path / "curriculum-racing.json", {"seeds": [0, 1], "generator_fingerprint": "abc", "target": {"maximize": None}}
     worlds_of = write_results(curriculum, out, setup)
 
@@ -54,7 +46,7 @@ def test_an_arm_recorded_under_the_same_setup_is_reused_with_its_world_values(tm
 
 
 def test_a_changed_setup_or_missing_values_reuse_nothing(tmp_path):
-    curriculum = load_curriculum()
+    curriculum = load_benchmark("curriculum")
     out, setup = tmp_path / "curriculum-racing.json", {"seeds": [0, 1], "generator_fingerprint": "abc"}
     write_results(curriculum, out, setup)
 

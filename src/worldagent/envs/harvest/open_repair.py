@@ -308,6 +308,12 @@ def chosen_rooms(wall_logit: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str 
     return choose_rooms(jnp.clip(wall_logit + wall_shift, -LOGIT_CLIP, LOGIT_CLIP), rounds, rule)
 
 
+def closed_layout(wall_logit: jax.Array, rounds: int, rule: str, wall_shift: float) -> tuple[jax.Array, jax.Array]:
+    """(group_masks bool[4, S, S], walls bool[S, S]) of the rooms ``chosen_rooms`` finds, before any entrance is carved."""
+    size = wall_logit.shape[-1]
+    return region_walls(*rooms_of(chosen_rooms(wall_logit, rounds, rule, wall_shift), size), size)
+
+
 def open_layout(
     logits: jax.Array, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0], wall_shift: float = 0.0, entrance_shift: float = 0.0
 ) -> tuple[jax.Array, jax.Array]:
@@ -315,8 +321,7 @@ def open_layout(
     (shifted by ``wall_shift``) find most probable, entrances carved by the unshifted ones (the rule's bar
     lowered by ``entrance_shift``), and its rooms as the generator's apple step sees them (``maps.generate_map``)."""
     wall_logit = jnp.clip(logits[0], -LOGIT_CLIP, LOGIT_CLIP)
-    size = wall_logit.shape[0]
-    group_masks, closed = region_walls(*rooms_of(chosen_rooms(logits[0], rounds, rule, wall_shift), size), size)
+    group_masks, closed = closed_layout(logits[0], rounds, rule, wall_shift)
     walls = closed & ~carve_best_entrances(wall_logit, closed, group_masks, rule, entrance_shift)
     return walls, jnp.concatenate([group_masks & ~closed[None], ~group_masks.any(axis=0)[None]])
 
@@ -363,10 +368,9 @@ def fit_wall_shift(wall_logits: jax.Array, target: float, rounds: int = DEFAULT_
 
 def region_candidates(wall_logits: jax.Array, wall_shift: float, rounds: int = DEFAULT_ROUNDS, rule: str = ENTRANCE_RULES[0]) -> jax.Array:
     """bool[B, 4, S·S]: each merged region's entrance candidates in the layouts found for wall logits f32[B, S, S]."""
-    size = wall_logits.shape[-1]
 
     def one(logit):
-        group_masks, closed = region_walls(*rooms_of(chosen_rooms(logit, rounds, rule, wall_shift), size), size)
+        group_masks, closed = closed_layout(logit, rounds, rule, wall_shift)
         return entrance_candidates(closed, group_masks).reshape(NUM_CORNERS, -1)
 
     return jax.jit(jax.vmap(one))(wall_logits)
